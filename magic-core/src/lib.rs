@@ -1,0 +1,26 @@
+//! # magic-core
+//!
+//! The embedded heart of **magic**: physical forward models, quantised networks, the model file and
+//! the inversion, in `no_std` Rust with no allocator.
+//!
+//! Observations X go through an encoder E to physical variables Z, a physical forward model F
+//! rebuilds X, and a small correction C absorbs systematic bias: X ≈ C(F(E(X))). The same code runs
+//! on a Cortex-M4F (f32), on the host (f64) and in training (exact derivatives through [`Dual`]).
+//!
+//! * [`real`] — the scalar trait the physics is written against (f32, f64, dual numbers, E1);
+//! * [`mogi`] — the Mogi point source for a GNSS network;
+//! * [`rtm`] — PROSPECT-D, 4SAIL, INFORM and Sentinel-2 band integration;
+//! * [`quant`] and [`nn`] — int8 / f32 dense layers and the MLPs built from them;
+//! * [`model_file`] — the exported model, decoded without allocation;
+//! * [`invert`] — observations to variables, reconstruction, residual and quality flags.
+#![no_std]
+#![deny(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod error;
+pub mod mogi;
+pub mod real;
+pub mod rtm;
+
+pub use error::Error;
+pub use real::{Dual, Real};

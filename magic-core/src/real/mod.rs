@@ -1,0 +1,248 @@
+//! The scalar the physics is written against.
+//!
+//! Every forward model in this crate (Mogi, PROSPECT-D, 4SAIL, INFORM) is generic over [`Real`], so
+//! one piece of code serves three purposes:
+//!
+//! * `f32` — the microcontroller path (hardware single precision on a Cortex-M4F);
+//! * `f64` — the host path, held to the reference outputs to 1e-9;
+//! * [`Dual<N>`] — forward-mode automatic differentiation: a value with `N` exact partial
+//!   derivatives, so a model evaluated on duals returns its Jacobian with no finite differences.
+//!
+//! Branches in the physics (numerical guards, series switches) look at [`Real::value`], the primal
+//! value, so all three scalars take the same branch for the same input.
+
+mod dual;
+mod e1;
+
+pub use dual::Dual;
+pub use e1::{e1_f64, E1_MAX_REL_ERROR};
+
+use core::fmt::Debug;
+use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
+
+/// A real scalar: `f32`, `f64` or a forward-mode [`Dual`] number.
+pub trait Real:
+    Copy
+    + Debug
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+    + DivAssign
+{
+    /// A constant (derivatives zero).
+    fn c(v: f64) -> Self;
+    /// The primal value as `f64` (for branching and reporting).
+    fn value(self) -> f64;
+    /// Square root.
+    fn sqrt(self) -> Self;
+    /// Natural exponential.
+    fn exp(self) -> Self;
+    /// Natural logarithm.
+    fn ln(self) -> Self;
+    /// Sine (radians).
+    fn sin(self) -> Self;
+    /// Cosine (radians).
+    fn cos(self) -> Self;
+    /// Tangent (radians).
+    fn tan(self) -> Self;
+    /// Arc cosine (radians).
+    fn acos(self) -> Self;
+    /// Arc sine (radians).
+    fn asin(self) -> Self;
+    /// Arc tangent (radians).
+    fn atan(self) -> Self;
+    /// Four-quadrant arc tangent of `self / x`.
+    fn atan2(self, x: Self) -> Self;
+    /// `self` raised to a real power (`self > 0`).
+    fn powf(self, e: Self) -> Self;
+    /// `self` raised to an integer power.
+    fn powi(self, n: i32) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// The exponential integral E1(x) = ∫₁^∞ e^(−xt)/t dt for x > 0 (derivative −e^(−x)/x).
+    fn e1(self) -> Self;
+
+    /// Zero.
+    #[inline]
+    fn zero() -> Self {
+        Self::c(0.0)
+    }
+    /// One.
+    #[inline]
+    fn one() -> Self {
+        Self::c(1.0)
+    }
+    /// Whether the value (and every derivative, for duals) is finite.
+    fn is_finite(self) -> bool;
+    /// The larger of two values (by primal value).
+    #[inline]
+    fn max(self, o: Self) -> Self {
+        if self.value() >= o.value() {
+            self
+        } else {
+            o
+        }
+    }
+    /// The smaller of two values (by primal value).
+    #[inline]
+    fn min(self, o: Self) -> Self {
+        if self.value() <= o.value() {
+            self
+        } else {
+            o
+        }
+    }
+    /// The square.
+    #[inline]
+    fn sq(self) -> Self {
+        self * self
+    }
+}
+
+impl Real for f64 {
+    #[inline]
+    fn c(v: f64) -> Self {
+        v
+    }
+    #[inline]
+    fn value(self) -> f64 {
+        self
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        libm::sqrt(self)
+    }
+    #[inline]
+    fn exp(self) -> Self {
+        libm::exp(self)
+    }
+    #[inline]
+    fn ln(self) -> Self {
+        libm::log(self)
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        libm::sin(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        libm::cos(self)
+    }
+    #[inline]
+    fn tan(self) -> Self {
+        libm::tan(self)
+    }
+    #[inline]
+    fn acos(self) -> Self {
+        libm::acos(self)
+    }
+    #[inline]
+    fn asin(self) -> Self {
+        libm::asin(self)
+    }
+    #[inline]
+    fn atan(self) -> Self {
+        libm::atan(self)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2(self, x)
+    }
+    #[inline]
+    fn powf(self, e: Self) -> Self {
+        libm::pow(self, e)
+    }
+    #[inline]
+    fn powi(self, n: i32) -> Self {
+        libm::pow(self, n as f64)
+    }
+    #[inline]
+    fn abs(self) -> Self {
+        libm::fabs(self)
+    }
+    #[inline]
+    fn e1(self) -> Self {
+        e1_f64(self)
+    }
+    #[inline]
+    fn is_finite(self) -> bool {
+        f64::is_finite(self)
+    }
+}
+
+impl Real for f32 {
+    #[inline]
+    fn c(v: f64) -> Self {
+        v as f32
+    }
+    #[inline]
+    fn value(self) -> f64 {
+        self as f64
+    }
+    #[inline]
+    fn sqrt(self) -> Self {
+        libm::sqrtf(self)
+    }
+    #[inline]
+    fn exp(self) -> Self {
+        libm::expf(self)
+    }
+    #[inline]
+    fn ln(self) -> Self {
+        libm::logf(self)
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        libm::sinf(self)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        libm::cosf(self)
+    }
+    #[inline]
+    fn tan(self) -> Self {
+        libm::tanf(self)
+    }
+    #[inline]
+    fn acos(self) -> Self {
+        libm::acosf(self)
+    }
+    #[inline]
+    fn asin(self) -> Self {
+        libm::asinf(self)
+    }
+    #[inline]
+    fn atan(self) -> Self {
+        libm::atanf(self)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2f(self, x)
+    }
+    #[inline]
+    fn powf(self, e: Self) -> Self {
+        libm::powf(self, e)
+    }
+    #[inline]
+    fn powi(self, n: i32) -> Self {
+        libm::powf(self, n as f32)
+    }
+    #[inline]
+    fn abs(self) -> Self {
+        libm::fabsf(self)
+    }
+    #[inline]
+    fn e1(self) -> Self {
+        e1_f64(self as f64) as f32
+    }
+    #[inline]
+    fn is_finite(self) -> bool {
+        f32::is_finite(self)
+    }
+}
