@@ -24,3 +24,10 @@ pub mod rtm;
 
 pub use error::Error;
 pub use real::{Dual, Real};
+pub mod invert;
+pub mod model_file;
+pub mod nn;
+pub mod quant;
+
+pub use invert::{invert, Flags, Inversion, Workspace};
+pub use model_file::{Model, Problem, Variant};

@@ -1,0 +1,249 @@
+//! The exported model: what the host trainer writes and the board reads.
+//!
+//! ```text
+//! "MAGC" | version: u16 LE | body length: u32 LE | body (postcard) | CRC-32 (ISO-HDLC) LE
+//! ```
+//!
+//! The CRC covers everything before it. The body is a [`Model`] serialised with postcard; decoding
+//! borrows every weight array straight from the byte slice (no allocation, no copy: a model in
+//! flash stays in flash), and [`Model::decode`] validates the decoded structure against the sizes
+//! this build was compiled for, so a corrupt, truncated or foreign file is an [`Error`], never a
+//! panic or an out-of-bounds read.
+
+use crate::mogi::{self, Station};
+use crate::nn::{validate_chain, Activation, Layer, MAX_LAYERS};
+use crate::quant::LeF32;
+use crate::Error;
+use serde::{Deserialize, Serialize};
+
+/// The first four bytes of every model file.
+pub const MAGIC: [u8; 4] = *b"MAGC";
+/// The format version this build reads and writes.
+pub const VERSION: u16 = 1;
+/// Largest station network the compiled core accepts.
+pub const MAX_STATIONS: usize = 32;
+/// Largest number of physical variables (source parameters plus effect parameters).
+pub const MAX_PARAMS: usize = 16;
+/// Largest number of observed channels.
+pub const MAX_OBS: usize = 3 * MAX_STATIONS;
+
+const HEADER: usize = 10;
+const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Which of the paper's models this is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Variant {
+    /// Plain autoencoder: encoder → latent → decoder (no physics).
+    A,
+    /// Encoder → physical variables → forward model F.
+    B,
+    /// Encoder → physical variables → F → correction C (paper eq. 5).
+    C,
+}
+
+/// The physical problem and its fixed description.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Problem {
+    /// Mogi source under a GNSS network; observations are uₑ ×S, uₙ ×S, uᵥ ×S in mm.
+    Mogi {
+        /// Station positions, in the order of the observation channels.
+        stations: heapless::Vec<Station, MAX_STATIONS>,
+    },
+    /// INFORM forest reflectance observed in spectral bands.
+    Rtm,
+}
+
+impl Problem {
+    /// A short name for messages.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Problem::Mogi { .. } => "mogi",
+            Problem::Rtm => "rtm",
+        }
+    }
+}
+
+/// A decoded model. Weight arrays borrow from the bytes it was decoded from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Model<'a> {
+    /// Paper variant.
+    pub variant: Variant,
+    /// Problem and geometry.
+    pub problem: Problem,
+    /// Observation mean (physical units) used to standardise: z = (x − mean) / scale.
+    #[serde(borrow)]
+    pub obs_mean: LeF32<'a>,
+    /// Observation scale (physical units).
+    #[serde(borrow)]
+    pub obs_scale: LeF32<'a>,
+    /// Physical variable bounds `[min, max]` (empty for variant A).
+    pub bounds: heapless::Vec<[f32; 2], MAX_PARAMS>,
+    /// Encoder layers; for B and C the last has a sigmoid and one output per variable.
+    #[serde(borrow)]
+    pub encoder: heapless::Vec<Layer<'a>, MAX_LAYERS>,
+    /// Correction C (variant C) or decoder (variant A); empty for B.
+    #[serde(borrow)]
+    pub decoder: heapless::Vec<Layer<'a>, MAX_LAYERS>,
+    /// Residual RMS (standardised units) above which an inversion is flagged; 0 disables.
+    pub residual_threshold: f32,
+}
+
+impl<'a> Model<'a> {
+    /// Number of observed channels.
+    pub fn n_obs(&self) -> usize {
+        self.obs_mean.len()
+    }
+
+    /// Number of physical variables the encoder outputs (latent size for variant A).
+    pub fn n_params(&self) -> usize {
+        self.encoder.last().map_or(0, |l| l.rows as usize)
+    }
+
+    /// Stations of a Mogi model.
+    pub fn stations(&self) -> Result<&[Station], Error> {
+        match &self.problem {
+            Problem::Mogi { stations } => Ok(stations),
+            _ => Err(Error::WrongProblem),
+        }
+    }
+
+    /// Decodes and validates a model file.
+    ///
+    /// ```
+    /// use magic_core::model_file::Model;
+    /// use magic_core::Error;
+    /// assert_eq!(Model::decode(b"not a model"), Err(Error::BadMagic));
+    /// assert_eq!(Model::decode(b"MAG"), Err(Error::Truncated));
+    /// ```
+    pub fn decode(bytes: &'a [u8]) -> Result<Model<'a>, Error> {
+        let n = bytes.len().min(4);
+        if bytes[..n] != MAGIC[..n] {
+            return Err(Error::BadMagic);
+        }
+        if bytes.len() < HEADER + 4 {
+            return Err(Error::Truncated);
+        }
+        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+        if version != VERSION {
+            return Err(Error::UnsupportedVersion { found: version, supported: VERSION });
+        }
+        let body_len = u32::from_le_bytes([bytes[6], bytes[7], bytes[8], bytes[9]]) as usize;
+        let end = HEADER.checked_add(body_len).ok_or(Error::Truncated)?;
+        let total = end.checked_add(4).ok_or(Error::Truncated)?;
+        if bytes.len() < total {
+            return Err(Error::Truncated);
+        }
+        if bytes.len() > total {
+            return Err(Error::InvalidModel("trailing bytes after the CRC"));
+        }
+        let stored = u32::from_le_bytes([bytes[end], bytes[end + 1], bytes[end + 2], bytes[end + 3]]);
+        let computed = CRC.checksum(&bytes[..end]);
+        if stored != computed {
+            return Err(Error::CrcMismatch { stored, computed });
+        }
+        let (model, rest): (Model<'a>, _) =
+            postcard::take_from_bytes(&bytes[HEADER..end]).map_err(|_| Error::Decode)?;
+        if !rest.is_empty() {
+            return Err(Error::Decode);
+        }
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// Checks every size and value against the compiled limits and against each other.
+    pub fn validate(&self) -> Result<(), Error> {
+        let n_obs = self.n_obs();
+        if n_obs == 0 || n_obs > MAX_OBS || self.obs_mean.0.len() != 4 * n_obs {
+            return Err(Error::InvalidModel("observation count is zero, too large or not whole f32s"));
+        }
+        if self.obs_scale.0.len() != self.obs_mean.0.len() {
+            return Err(Error::SizeMismatch { what: "obs_scale", expected: n_obs, found: self.obs_scale.len() });
+        }
+        if !self.obs_mean.iter().all(f32::is_finite) {
+            return Err(Error::InvalidModel("non-finite observation mean"));
+        }
+        if !self.obs_scale.iter().all(|s| s.is_finite() && s > 0.0) {
+            return Err(Error::InvalidModel("observation scale not positive and finite"));
+        }
+        if !(self.residual_threshold.is_finite() && self.residual_threshold >= 0.0) {
+            return Err(Error::InvalidModel("residual threshold not finite and non-negative"));
+        }
+        let n_phys = match &self.problem {
+            Problem::Mogi { stations } => {
+                if stations.is_empty() {
+                    return Err(Error::InvalidModel("no stations"));
+                }
+                if n_obs != 3 * stations.len() {
+                    return Err(Error::SizeMismatch {
+                        what: "observations (3 per station)",
+                        expected: 3 * stations.len(),
+                        found: n_obs,
+                    });
+                }
+                if !stations.iter().all(|s| s.x_km.is_finite() && s.y_km.is_finite() && s.z_km.is_finite()) {
+                    return Err(Error::InvalidModel("non-finite station position"));
+                }
+                mogi::N_PARAMS
+            }
+            Problem::Rtm => return Err(Error::InvalidModel("RTM models are not supported by this build")),
+        };
+        let n_params = self.n_params();
+        match self.variant {
+            Variant::A => {
+                if n_params == 0 || n_params > MAX_PARAMS {
+                    return Err(Error::InvalidModel("latent size is zero or too large"));
+                }
+                validate_chain(&self.encoder, n_obs, n_params)?;
+                validate_chain(&self.decoder, n_params, n_obs)?;
+            }
+            Variant::B | Variant::C => {
+                validate_chain(&self.encoder, n_obs, n_phys)?;
+                let head = self.encoder.last().ok_or(Error::InvalidModel("empty encoder"))?;
+                if head.act != Activation::Sigmoid || head.is_int8() {
+                    return Err(Error::InvalidModel("encoder head must be an f32 sigmoid layer"));
+                }
+                if self.bounds.len() != n_phys {
+                    return Err(Error::SizeMismatch { what: "bounds", expected: n_phys, found: self.bounds.len() });
+                }
+                if !self.bounds.iter().all(|b| b[0].is_finite() && b[1].is_finite() && b[0] < b[1]) {
+                    return Err(Error::InvalidModel("bounds must be finite with min < max"));
+                }
+                if let Problem::Mogi { .. } = self.problem {
+                    if self.bounds[2][0] <= 0.0 {
+                        return Err(Error::InvalidModel("depth bound must be positive"));
+                    }
+                }
+                match self.variant {
+                    Variant::C => validate_chain(&self.decoder, n_obs, n_obs)?,
+                    _ => {
+                        if !self.decoder.is_empty() {
+                            return Err(Error::InvalidModel("variant B has no correction layers"));
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Serialises into `buf`, returning the number of bytes written.
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, Error> {
+        if buf.len() < HEADER + 4 {
+            return Err(Error::BufferTooSmall { needed: HEADER + 4 });
+        }
+        let cap = buf.len();
+        let body_len = postcard::to_slice(self, &mut buf[HEADER..])
+            .map_err(|_| Error::BufferTooSmall { needed: cap + 1 })?
+            .len();
+        let end = HEADER + body_len;
+        if buf.len() < end + 4 {
+            return Err(Error::BufferTooSmall { needed: end + 4 });
+        }
+        buf[..4].copy_from_slice(&MAGIC);
+        buf[4..6].copy_from_slice(&VERSION.to_le_bytes());
+        buf[6..10].copy_from_slice(&(body_len as u32).to_le_bytes());
+        let crc = CRC.checksum(&buf[..end]);
+        buf[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+        Ok(end + 4)
+    }
+}
