@@ -1,0 +1,19 @@
+//! # magic-train
+//!
+//! The host side of **magic**: data readers, the paper's models in candle with the core's physics
+//! as a differentiable op, training, int8 export, evaluation and the `magic` command line.
+
+pub mod data;
+pub mod eval;
+pub mod export;
+pub mod nets;
+pub mod physics;
+pub mod pipeline;
+pub mod train;
+
+pub use data::gnss::GnssData;
+pub use eval::{evaluate, EvalResult};
+pub use export::OwnedModel;
+pub use nets::Net;
+pub use physics::{MogiPhysics, Physics, PhysicsOp};
+pub use train::{train, TrainConfig, TrainLog};

@@ -1,0 +1,62 @@
+//! End-to-end jobs shared by the CLI and the tests: train a Mogi model of a variant on a GNSS
+//! dataset and turn it into a model file.
+
+use crate::data::gnss::GnssData;
+use crate::export::OwnedModel;
+use crate::nets::Net;
+use crate::physics::{MogiPhysics, Physics};
+use crate::train::{train, TrainConfig, TrainLog};
+use anyhow::{anyhow, Result};
+use magic_core::model_file::Problem;
+use magic_core::mogi::{Station, PAPER_BOUNDS};
+use magic_core::{invert, Model, Variant, Workspace};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use std::sync::Arc;
+
+/// The Mogi problem description of a dataset.
+pub fn mogi_problem(stations: &[Station]) -> Result<Problem> {
+    let mut v = heapless::Vec::new();
+    for s in stations {
+        v.push(*s).map_err(|_| anyhow!("more stations than the core supports ({})", magic_core::model_file::MAX_STATIONS))?;
+    }
+    Ok(Problem::Mogi { stations: v })
+}
+
+/// Trains a Mogi model of `variant` on `data` and returns it as an f32 model with its log.
+pub fn train_mogi(data: &GnssData, variant: Variant, cfg: &TrainConfig, seed: u64) -> Result<(OwnedModel, TrainLog)> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let physics: Arc<dyn Physics> = Arc::new(MogiPhysics { stations: data.stations.clone() });
+    let bounds: Vec<[f64; 2]> = PAPER_BOUNDS.to_vec();
+    let net = Net::new(
+        variant,
+        data.n_obs(),
+        (variant != Variant::A).then_some(physics),
+        bounds,
+        data.mean.clone(),
+        data.scale.clone(),
+        4,
+        &mut rng,
+    )?;
+    let log = train(&net, &data.train.x, &data.valid.x, cfg, &mut rng)?;
+    let mut model = OwnedModel::from_net(&net, mogi_problem(&data.stations)?)?;
+    model.residual_threshold = residual_threshold(&model, &data.valid.x)?;
+    Ok((model, log))
+}
+
+/// The 99th percentile of the standardised residual RMS on `x`: inversions above it are flagged.
+pub fn residual_threshold(model: &OwnedModel, x: &[Vec<f32>]) -> Result<f32> {
+    let bytes = model.encode()?;
+    let m = Model::decode(&bytes).map_err(|e| anyhow!("{e}"))?;
+    let mut ws = Workspace::default();
+    let mut r = Vec::with_capacity(x.len());
+    for row in x {
+        let obs: Vec<f32> = row.iter().enumerate().map(|(c, v)| v * model.scale[c] + model.mean[c]).collect();
+        r.push(invert::<f64>(&m, &obs, &mut ws).map_err(|e| anyhow!("{e}"))?.residual_rms_std);
+    }
+    if r.is_empty() {
+        return Ok(0.0);
+    }
+    r.sort_by(f64::total_cmp);
+    Ok(r[((r.len() - 1) as f64 * 0.99) as usize] as f32)
+}
