@@ -25,6 +25,7 @@ pub mod rtm;
 pub use error::Error;
 pub use real::{Dual, Real};
 pub mod invert;
+pub mod line;
 pub mod model_file;
 pub mod nn;
 pub mod quant;

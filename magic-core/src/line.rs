@@ -1,0 +1,94 @@
+//! The plain-text record format shared by the firmware and the host: one observation vector per
+//! line in, one result per line out, so that `magic invert` and the board print the same rows.
+//!
+//! Input: comma-separated numbers (whitespace around them ignored); an empty field or `nan` marks a
+//! missing channel. Output: `x_km,y_km,depth_km,dv_1e6m3,residual_rms,flags,stations_used` (the
+//! variables of the model, then the residual in physical units, the flag bits and the bit mask of
+//! stations used), or `error,<message>` for a line that could not be inverted.
+
+use crate::{Error, Inversion, Real};
+use core::fmt::{self, Write};
+
+/// Why an input line could not be read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LineError {
+    /// The line has a different number of fields.
+    FieldCount {
+        /// Fields expected.
+        expected: usize,
+        /// Fields found (counting stops one past the expected number).
+        found: usize,
+    },
+    /// A field is not a number (1-based field index).
+    NotANumber {
+        /// 1-based field.
+        field: usize,
+    },
+    /// A field is infinite or absurdly large (1-based field index).
+    OutOfRange {
+        /// 1-based field.
+        field: usize,
+    },
+    /// The inversion failed.
+    Invert(Error),
+}
+
+impl fmt::Display for LineError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LineError::FieldCount { expected, found } => {
+                write!(f, "expected {expected} fields, found {found}")
+            }
+            LineError::NotANumber { field } => write!(f, "field {field}: not a number"),
+            LineError::OutOfRange { field } => write!(f, "field {field}: infinite or beyond 10 m"),
+            LineError::Invert(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+/// Parses one line of comma-separated numbers into `out` (all of it), NaN for missing fields.
+///
+/// ```
+/// let mut v = [0f32; 3];
+/// magic_core::line::parse_obs(" 1.5, ,nan", &mut v).unwrap();
+/// assert_eq!(v[0], 1.5);
+/// assert!(v[1].is_nan() && v[2].is_nan());
+/// assert!(magic_core::line::parse_obs("1,2", &mut v).is_err());
+/// ```
+pub fn parse_obs(line: &str, out: &mut [f32]) -> Result<(), LineError> {
+    let line = line.trim_end_matches(['\r', '\n']);
+    let mut n = 0usize;
+    for (i, field) in line.split(',').enumerate() {
+        if i >= out.len() {
+            return Err(LineError::FieldCount { expected: out.len(), found: i + 1 });
+        }
+        let t = field.trim();
+        out[i] = if t.is_empty() || t.eq_ignore_ascii_case("nan") {
+            f32::NAN
+        } else {
+            let v: f32 = t.parse().map_err(|_| LineError::NotANumber { field: i + 1 })?;
+            if !v.is_finite() || (v as f64).abs() > crate::invert::MAX_ABS_OBS {
+                return Err(LineError::OutOfRange { field: i + 1 });
+            }
+            v
+        };
+        n = i + 1;
+    }
+    if n != out.len() {
+        return Err(LineError::FieldCount { expected: out.len(), found: n });
+    }
+    Ok(())
+}
+
+/// Writes the result row of an inversion (no newline).
+pub fn write_result<R: Real, W: Write>(w: &mut W, inv: &Inversion<R>) -> fmt::Result {
+    for p in &inv.params[..inv.n_params] {
+        write!(w, "{:.6},", p.value())?;
+    }
+    write!(w, "{:.6},{},{}", inv.residual_rms, inv.flags.0, inv.used)
+}
+
+/// Writes an error row (no newline).
+pub fn write_error<W: Write>(w: &mut W, e: &LineError) -> fmt::Result {
+    write!(w, "error,{e}")
+}
