@@ -1,0 +1,444 @@
+//! The INFORM + Sentinel-2 forward model bound to its tables: 21 inputs → 13 bands.
+//!
+//! [`Tables`] borrows every spectral table (the crate ships none); [`Inform::new`] checks their
+//! sizes once and finds the wavelengths the bands need; [`Inform::forward`] validates the inputs,
+//! computes the wavelength-independent terms once ([`Scene`]) and evaluates PROSPECT-D, four 4SAIL
+//! calls and FLIM only at those wavelengths. Everything is generic over [`Real`]: `f64`, `f32`,
+//! and [`Dual`] for the exact Jacobian ([`Inform::jacobian`]).
+
+use super::inform::{crown_from_cover, Geometry, Scene, SpectralRow, Stand, WavelengthTerms};
+use super::prospect::{Coefficients, Leaf};
+use super::sail::{CampbellBins, Lidf, LITAB_DEG};
+use super::sensor::Resampling;
+use crate::real::{Dual, Real};
+use crate::Error;
+
+/// Number of model inputs.
+pub const N_INPUTS: usize = 21;
+
+/// Input names, in order (the columns of `rtm_inform_s2_*.csv`).
+pub const INPUT_NAMES: [&str; N_INPUTS] = [
+    "N", "cab", "car", "anth", "cbrown", "cw", "cm", "cp", "cbc", "LAI", "typeLIDF", "LIDF",
+    "hspot", "psoil", "tts", "tto", "psi", "LAIu", "cd", "sd", "h",
+];
+
+/// Number of Sentinel-2 bands.
+pub const N_BANDS: usize = 13;
+
+/// Number of learned variables.
+pub const N_LEARNED: usize = 7;
+
+/// The learned variables, in order (paper Table 1); `cd` and `h` are derived from `fc`.
+pub const LEARNED_NAMES: [&str; N_LEARNED] = ["N", "cab", "cw", "cm", "LAI", "LAIu", "fc"];
+
+/// The paper's bounds of the learned variables (min, max).
+pub const LEARNED_BOUNDS: [[f64; 2]; N_LEARNED] = [
+    [1.0, 3.0],
+    [10.0, 80.0],
+    [0.001, 0.02],
+    [0.005, 0.05],
+    [0.01, 5.0],
+    [0.01, 1.0],
+    [0.1, 1.0],
+];
+
+/// The borrowed tables, one value per wavelength on a common grid (1 nm, 400–2500 nm for the
+/// published tables), plus the leaf-angle beta table and the sensor's resampling matrix.
+#[derive(Clone, Copy, Debug)]
+pub struct Tables<'a> {
+    /// PROSPECT-D coefficients.
+    pub prospect: Coefficients<'a>,
+    /// Dry soil reflectance.
+    pub soil_dry: &'a [f64],
+    /// Wet soil reflectance.
+    pub soil_wet: &'a [f64],
+    /// Direct solar irradiance.
+    pub es: &'a [f64],
+    /// Diffuse sky irradiance.
+    pub ed: &'a [f64],
+    /// Beta leaf-angle table, 13 angles × rows, angle-major (`beta_0…beta_5` of
+    /// `lidf_tables.csv`).
+    pub lidf_beta: &'a [f64],
+    /// Resampling matrix, wavelengths × bands, row-major.
+    pub resampling: &'a [f64],
+}
+
+/// The INFORM + sensor model over borrowed tables.
+#[derive(Clone, Copy, Debug)]
+pub struct Inform<'a> {
+    tables: Tables<'a>,
+    sensor: Resampling<'a>,
+}
+
+/// Fixed (not learned) inputs for [`Inform::forward_learned`]; `Default` gives the paper's values
+/// (Appendix A.3): car 10, anth 2, cbrown 0.25, cp 0.0015, cbc 0.01, beta LIDF row 5, hotspot
+/// 0.01, psoil 0.8, sun zenith 30°, view zenith 0°, azimuth 0°, stem density 500 ha⁻¹.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Fixed {
+    /// Carotenoids.
+    pub car: f64,
+    /// Anthocyanins.
+    pub anth: f64,
+    /// Brown pigments.
+    pub cbrown: f64,
+    /// Proteins (not used by PROSPECT-D).
+    pub cp: f64,
+    /// Carbon-based constituents (not used by PROSPECT-D).
+    pub cbc: f64,
+    /// Leaf angle distribution type: 1 beta table, 2 Campbell.
+    pub type_lidf: f64,
+    /// Beta table row (type 1) or mean leaf angle in degrees (type 2).
+    pub lidf: f64,
+    /// Hotspot size.
+    pub hspot: f64,
+    /// Soil brightness.
+    pub psoil: f64,
+    /// Sun zenith (degrees).
+    pub tts: f64,
+    /// View zenith (degrees).
+    pub tto: f64,
+    /// Relative azimuth (degrees).
+    pub psi: f64,
+    /// Stem density (ha⁻¹).
+    pub sd: f64,
+}
+
+impl Default for Fixed {
+    fn default() -> Self {
+        Fixed {
+            car: 10.0,
+            anth: 2.0,
+            cbrown: 0.25,
+            cp: 0.0015,
+            cbc: 0.01,
+            type_lidf: 1.0,
+            lidf: 5.0,
+            hspot: 0.01,
+            psoil: 0.8,
+            tts: 30.0,
+            tto: 0.0,
+            psi: 0.0,
+            sd: 500.0,
+        }
+    }
+}
+
+/// The 21 model inputs from the 7 learned variables `[N, cab, cw, cm, LAI, LAIu, fc]` and the fixed
+/// ones; `cd` and `h` follow from `fc` and `sd` (paper eqs. 7–8).
+pub fn inputs_from_learned<R: Real>(z: &[R; N_LEARNED], f: &Fixed) -> [R; N_INPUTS] {
+    let sd = R::c(f.sd);
+    let (cd, h) = crown_from_cover(z[6], sd);
+    [
+        z[0],
+        z[1],
+        R::c(f.car),
+        R::c(f.anth),
+        R::c(f.cbrown),
+        z[2],
+        z[3],
+        R::c(f.cp),
+        R::c(f.cbc),
+        z[4],
+        R::c(f.type_lidf),
+        R::c(f.lidf),
+        R::c(f.hspot),
+        R::c(f.psoil),
+        R::c(f.tts),
+        R::c(f.tto),
+        R::c(f.psi),
+        z[5],
+        cd,
+        sd,
+        h,
+    ]
+}
+
+fn check_len(what: &'static str, s: &[f64], n: usize) -> Result<(), Error> {
+    if s.len() != n {
+        return Err(Error::SizeMismatch {
+            what,
+            expected: n,
+            found: s.len(),
+        });
+    }
+    Ok(())
+}
+
+impl<'a> Inform<'a> {
+    /// Checks the table sizes (all spectral columns of one length `n`, the beta table a multiple
+    /// of 13, the resampling matrix `n × 13`) and prepares the band integration.
+    pub fn new(tables: Tables<'a>) -> Result<Self, Error> {
+        let n = tables.prospect.len();
+        if n == 0 {
+            return Err(Error::SizeMismatch {
+                what: "prospect nr",
+                expected: 1,
+                found: 0,
+            });
+        }
+        for (what, col) in tables.prospect.columns() {
+            check_len(what, col, n)?;
+        }
+        check_len("soil dry", tables.soil_dry, n)?;
+        check_len("soil wet", tables.soil_wet, n)?;
+        check_len("solar direct", tables.es, n)?;
+        check_len("solar diffuse", tables.ed, n)?;
+        let nb = LITAB_DEG.len();
+        if tables.lidf_beta.is_empty() || tables.lidf_beta.len() / nb * nb != tables.lidf_beta.len()
+        {
+            let rows = (tables.lidf_beta.len() / nb).max(1);
+            return Err(Error::SizeMismatch {
+                what: "lidf beta table",
+                expected: rows * nb,
+                found: tables.lidf_beta.len(),
+            });
+        }
+        let sensor = Resampling::new(tables.resampling, n, N_BANDS)?;
+        Ok(Inform { tables, sensor })
+    }
+
+    /// The tables.
+    pub fn tables(&self) -> &Tables<'a> {
+        &self.tables
+    }
+
+    /// The band integration.
+    pub fn sensor(&self) -> &Resampling<'a> {
+        &self.sensor
+    }
+
+    /// Number of wavelengths of the table grid.
+    pub fn n_wavelengths(&self) -> usize {
+        self.tables.prospect.len()
+    }
+
+    /// The spectral row of wavelength index `i` (`None` past the end).
+    #[inline]
+    pub fn row(&self, i: usize) -> Option<SpectralRow> {
+        let t = &self.tables;
+        Some(SpectralRow {
+            coef: t.prospect.row(i)?,
+            soil_dry: *t.soil_dry.get(i)?,
+            soil_wet: *t.soil_wet.get(i)?,
+            es: *t.es.get(i)?,
+            ed: *t.ed.get(i)?,
+        })
+    }
+
+    /// Validates the 21 inputs and computes the wavelength-independent terms.
+    pub fn scene<R: Real>(&self, x: &[R; N_INPUTS], geometry: Geometry) -> Result<Scene<R>, Error> {
+        for (i, v) in x.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(Error::NonFinite {
+                    what: "inform input",
+                    index: i,
+                });
+            }
+        }
+        let v = |i: usize| x[i].value();
+        if v(0) <= 0.0 {
+            return Err(Error::OutOfRange {
+                what: "N (must be > 0)",
+            });
+        }
+        for (i, name) in [
+            (1, "cab"),
+            (2, "car"),
+            (3, "anth"),
+            (4, "cbrown"),
+            (5, "cw"),
+            (6, "cm"),
+        ] {
+            if v(i) < 0.0 {
+                return Err(Error::OutOfRange { what: name });
+            }
+        }
+        if v(9) <= 0.0 {
+            return Err(Error::OutOfRange {
+                what: "LAI (must be > 0)",
+            });
+        }
+        if v(17) <= 0.0 {
+            return Err(Error::OutOfRange {
+                what: "LAIu (must be > 0)",
+            });
+        }
+        if v(12) < 0.0 {
+            return Err(Error::OutOfRange { what: "hspot" });
+        }
+        if !(0.0..=1.0).contains(&v(13)) {
+            return Err(Error::OutOfRange {
+                what: "psoil (0..1)",
+            });
+        }
+        if !(0.0..90.0).contains(&v(14)) {
+            return Err(Error::OutOfRange {
+                what: "tts (0..90 degrees)",
+            });
+        }
+        if !(0.0..90.0).contains(&v(15)) {
+            return Err(Error::OutOfRange {
+                what: "tto (0..90 degrees)",
+            });
+        }
+        if v(18) <= 0.0 || v(19) <= 0.0 || v(20) < 0.0 {
+            return Err(Error::OutOfRange {
+                what: "cd, sd (> 0) or h (>= 0)",
+            });
+        }
+        let type_lidf = v(10);
+        let lidf = if type_lidf == 1.0 {
+            let row = v(11);
+            let n_rows = self.tables.lidf_beta.len() / LITAB_DEG.len();
+            if !(row >= 0.0 && row < n_rows as f64) {
+                return Err(Error::OutOfRange {
+                    what: "LIDF beta table row",
+                });
+            }
+            // The reference truncates the row index to an integer.
+            Lidf::from_beta_table(self.tables.lidf_beta, row as usize)?
+        } else if type_lidf == 2.0 {
+            Lidf::campbell(x[11], CampbellBins::Reference13)?
+        } else {
+            return Err(Error::OutOfRange {
+                what: "typeLIDF (1 beta table, 2 Campbell)",
+            });
+        };
+        let stand = Stand {
+            leaf: Leaf {
+                n: x[0],
+                cab: x[1],
+                car: x[2],
+                anth: x[3],
+                cbrown: x[4],
+                cw: x[5],
+                cm: x[6],
+            },
+            lai: x[9],
+            lai_u: x[17],
+            hspot: x[12],
+            psoil: x[13],
+            tts: x[14],
+            tto: x[15],
+            psi: x[16],
+            cd: x[18],
+            sd: x[19],
+            h: x[20],
+        };
+        Ok(Scene::new(&stand, &lidf, geometry))
+    }
+
+    /// The 13 Sentinel-2 bands for the 21 inputs.
+    ///
+    /// Errors: a non-finite input ([`Error::NonFinite`] with its index), an input outside the
+    /// model's domain or an unknown `typeLIDF` / beta row ([`Error::OutOfRange`]).
+    pub fn forward<R: Real>(
+        &self,
+        x: &[R; N_INPUTS],
+        geometry: Geometry,
+    ) -> Result<[R; N_BANDS], Error> {
+        let scene = self.scene(x, geometry)?;
+        let mut out = [R::zero(); N_BANDS];
+        self.sensor.integrate(
+            |i| match self.row(i) {
+                Some(row) => scene.wavelength(&row).r_forest,
+                None => R::c(f64::NAN),
+            },
+            &mut out,
+        )?;
+        Ok(out)
+    }
+
+    /// Every intermediate result at wavelength index `i` (for stepwise checks and plots).
+    pub fn wavelength<R: Real>(
+        &self,
+        x: &[R; N_INPUTS],
+        geometry: Geometry,
+        i: usize,
+    ) -> Result<WavelengthTerms<R>, Error> {
+        let scene = self.scene(x, geometry)?;
+        let row = self.row(i).ok_or(Error::OutOfRange {
+            what: "wavelength index",
+        })?;
+        Ok(scene.wavelength(&row))
+    }
+
+    /// The forest reflectance at every wavelength of the grid (`out.len()` = number of
+    /// wavelengths).
+    pub fn spectrum<R: Real>(
+        &self,
+        x: &[R; N_INPUTS],
+        geometry: Geometry,
+        out: &mut [R],
+    ) -> Result<(), Error> {
+        let n = self.n_wavelengths();
+        if out.len() != n {
+            return Err(Error::SizeMismatch {
+                what: "spectrum output",
+                expected: n,
+                found: out.len(),
+            });
+        }
+        let scene = self.scene(x, geometry)?;
+        for (i, o) in out.iter_mut().enumerate() {
+            let row = self.row(i).ok_or(Error::OutOfRange {
+                what: "wavelength index",
+            })?;
+            *o = scene.wavelength(&row).r_forest;
+        }
+        Ok(())
+    }
+
+    /// The 13 bands from the 7 learned variables `[N, cab, cw, cm, LAI, LAIu, fc]`.
+    pub fn forward_learned<R: Real>(
+        &self,
+        z: &[R; N_LEARNED],
+        fixed: &Fixed,
+        geometry: Geometry,
+    ) -> Result<[R; N_BANDS], Error> {
+        if let Some(i) = z.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "learned variable",
+                index: i,
+            });
+        }
+        if z[6].value() <= 0.0 {
+            return Err(Error::OutOfRange {
+                what: "fc (must be > 0)",
+            });
+        }
+        self.forward(&inputs_from_learned(z, fixed), geometry)
+    }
+
+    /// Bands and exact Jacobian `∂band/∂z` (13 × 7) at the learned variables `z`, by forward-mode
+    /// differentiation with [`Dual<7>`].
+    pub fn jacobian(
+        &self,
+        z: &[f64; N_LEARNED],
+        fixed: &Fixed,
+        geometry: Geometry,
+    ) -> Result<([f64; N_BANDS], [[f64; N_LEARNED]; N_BANDS]), Error> {
+        let mut zd = [Dual::<N_LEARNED>::constant(0.0); N_LEARNED];
+        for (i, (d, &v)) in zd.iter_mut().zip(z).enumerate() {
+            *d = Dual::var(v, i);
+        }
+        let out = self.forward_learned(&zd, fixed, geometry)?;
+        let mut y = [0.0; N_BANDS];
+        let mut jac = [[0.0; N_LEARNED]; N_BANDS];
+        for (b, o) in out.iter().enumerate() {
+            y[b] = o.v;
+            jac[b] = o.d;
+        }
+        Ok((y, jac))
+    }
+}
+
+/// One-shot convenience: builds an [`Inform`] over `tables` and runs [`Inform::forward`]. Prefer
+/// keeping an [`Inform`] when running many spectra (it scans the resampling matrix once).
+pub fn inform_s2<R: Real>(
+    tables: &Tables<'_>,
+    x: &[R; N_INPUTS],
+    geometry: Geometry,
+) -> Result<[R; N_BANDS], Error> {
+    Inform::new(*tables)?.forward(x, geometry)
+}

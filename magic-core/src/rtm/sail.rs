@@ -1,0 +1,820 @@
+//! 4SAIL canopy reflectance (Verhoef 1984; Verhoef, Jia, Xiao & Su 2007): a turbid layer of
+//! leaves with a leaf inclination distribution (LIDF) over a Lambertian background.
+//!
+//! The work is split by what it depends on, so a spectrum costs little:
+//!
+//! * [`Lidf`] — leaf inclination weights (beta table rows or Campbell's ellipsoidal distribution);
+//! * [`extinction`] — per geometry: extinction coefficients `ks`, `ko`, the bidirectional
+//!   scattering coefficients `sob`, `sof`, `bf` and the hotspot distance `dso` (Verhoef's
+//!   `volscatt` summed over the LIDF). No wavelength enters.
+//! * [`layer`] — per geometry and LAI: direct transmittances `tss`, `too`, the hotspot-corrected
+//!   joint transmittance `tsstoo` and the single-scattering integral `sumint` (exponential
+//!   Simpson integration with Bréon's 2/(ks+ko) correction).
+//! * [`medium`] — per wavelength and LIDF: the diffuse scattering coefficients, the attenuation
+//!   eigenvalue `m` and the infinite-layer reflectance `rinf` (independent of sun and view).
+//! * [`sail`] — per wavelength and layer: the four reflectance factors `rsot`, `rdot`, `rsdt`,
+//!   `rddt` of canopy + background, and the layer transmittances.
+//!
+//! Details that follow the reference implementation because they change outputs: the `J1`
+//! function switches to its series form when `|(k − l)·LAI| ≤ 1e-3`, and in
+//! [`HotspotRule::Reference`] the hotspot parameter `alf` is capped at 200 (and set to 200 when
+//! the hotspot size is 0) and the hotspot integral uses 19 segments (the reference overwrites its
+//! 19th abscissa with 1). [`HotspotRule::Physical`] follows the published model (and the `prosail`
+//! package) instead: 20 segments, no cap, and hotspot 0 means no hotspot correlation
+//! (`tsstoo = tss·too`).
+
+use super::prospect::LeafOptics;
+use crate::real::Real;
+use crate::Error;
+use core::f64::consts::{FRAC_PI_2, PI};
+
+/// Leaf inclination bin centres (degrees) of the reference's 13-bin discretisation.
+pub const LITAB_DEG: [f64; 13] = [
+    5.0, 15.0, 25.0, 35.0, 45.0, 55.0, 65.0, 75.0, 81.0, 83.0, 85.0, 87.0, 89.0,
+];
+
+/// Bin edges (degrees) of the 13-bin discretisation (10° bins to 80°, then 2° bins).
+const EDGES13_DEG: [f64; 14] = [
+    0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 82.0, 84.0, 86.0, 88.0, 90.0,
+];
+
+/// Largest number of inclination bins a [`Lidf`] holds.
+pub const MAX_BINS: usize = 18;
+
+/// Below this `|(k − l)·LAI|` the `J1` function uses its series form (reference threshold).
+pub const J1_SERIES_THRESHOLD: f64 = 1e-3;
+
+/// Largest hotspot parameter `alf` in [`HotspotRule::Reference`].
+pub const REFERENCE_ALF_CAP: f64 = 200.0;
+
+/// How a Campbell (ellipsoidal) distribution is discretised.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CampbellBins {
+    /// The reference's 13 bins, centres [`LITAB_DEG`] (as `lidf_tables.csv`).
+    Reference13,
+    /// 18 bins of 5°, centres 2.5°, 7.5°, …, 87.5° (as the `prosail` package).
+    Uniform18,
+}
+
+/// A leaf inclination distribution: weights (summing to 1) at bin-centre angles.
+#[derive(Clone, Copy, Debug)]
+pub struct Lidf<R> {
+    n: usize,
+    angle_deg: [f64; MAX_BINS],
+    weight: [R; MAX_BINS],
+}
+
+impl<R: Real> Lidf<R> {
+    /// Row `row` of a beta-distribution table with 13 inclination bins ([`LITAB_DEG`]), stored
+    /// angle-major as in `lidf_tables.csv`: the weight of bin `i` in distribution `row` is
+    /// `table[i * n_rows + row]` with `n_rows = table.len() / 13`.
+    pub fn from_beta_table(table: &[f64], row: usize) -> Result<Self, Error> {
+        if table.is_empty() || table.len() / LITAB_DEG.len() * LITAB_DEG.len() != table.len() {
+            return Err(Error::SizeMismatch {
+                what: "lidf beta table (13 angles x rows)",
+                expected: LITAB_DEG.len() * (table.len() / LITAB_DEG.len()).max(1),
+                found: table.len(),
+            });
+        }
+        let n_rows = table.len() / LITAB_DEG.len();
+        if row >= n_rows {
+            return Err(Error::OutOfRange {
+                what: "LIDF beta table row",
+            });
+        }
+        let mut l = Lidf {
+            n: LITAB_DEG.len(),
+            angle_deg: [0.0; MAX_BINS],
+            weight: [R::zero(); MAX_BINS],
+        };
+        for (i, &a) in LITAB_DEG.iter().enumerate() {
+            let w = table[i * n_rows + row];
+            if !w.is_finite() {
+                return Err(Error::NonFinite {
+                    what: "lidf beta table",
+                    index: i * n_rows + row,
+                });
+            }
+            l.angle_deg[i] = a;
+            l.weight[i] = R::c(w);
+        }
+        Ok(l)
+    }
+
+    /// Campbell's ellipsoidal distribution for mean leaf angle `ala` (degrees, 0 < ala < 90),
+    /// integrated over each bin analytically (Campbell 1990) and normalised to sum 1.
+    pub fn campbell(ala: R, bins: CampbellBins) -> Result<Self, Error> {
+        let a = ala.value();
+        if !a.is_finite() {
+            return Err(Error::NonFinite {
+                what: "mean leaf angle",
+                index: 0,
+            });
+        }
+        if !(a > 0.0 && a < 90.0) {
+            return Err(Error::OutOfRange {
+                what: "mean leaf angle (0..90 degrees)",
+            });
+        }
+        let excent = (R::c(-1.6184e-5) * ala * ala * ala + R::c(2.1145e-3) * ala * ala
+            - R::c(1.2390e-1) * ala
+            + R::c(3.2491))
+        .exp();
+        let ev = excent.value();
+        let mut l = Lidf {
+            n: 0,
+            angle_deg: [0.0; MAX_BINS],
+            weight: [R::zero(); MAX_BINS],
+        };
+        let (n, step) = match bins {
+            CampbellBins::Reference13 => (13, 0.0),
+            CampbellBins::Uniform18 => (18, 5.0),
+        };
+        l.n = n;
+        let e2 = excent * excent;
+        let one = R::one();
+        // alph = e / sqrt(|1 − e²|) (unused when e == 1)
+        let alph = if ev == 1.0 {
+            one
+        } else {
+            excent / (one - e2).abs().sqrt()
+        };
+        let alph2 = alph * alph;
+        let prim = |tl_deg: f64| -> R {
+            let t = libm::tan(tl_deg * PI / 180.0);
+            let x = excent / (one + e2 * R::c(t * t)).sqrt();
+            if ev > 1.0 {
+                let s = (alph2 + x * x).sqrt();
+                x * s + alph2 * (x + s).ln()
+            } else {
+                let s = (alph2 - x * x).sqrt();
+                x * s + alph2 * (x / alph).asin()
+            }
+        };
+        let mut sum = R::zero();
+        for i in 0..n {
+            let (lo, hi, centre) = match bins {
+                CampbellBins::Reference13 => (EDGES13_DEG[i], EDGES13_DEG[i + 1], LITAB_DEG[i]),
+                CampbellBins::Uniform18 => (
+                    i as f64 * step,
+                    (i + 1) as f64 * step,
+                    (i as f64 + 0.5) * step,
+                ),
+            };
+            let f = if ev == 1.0 {
+                R::c(libm::fabs(
+                    libm::cos(lo * PI / 180.0) - libm::cos(hi * PI / 180.0),
+                ))
+            } else {
+                (prim(hi) - prim(lo)).abs()
+            };
+            l.angle_deg[i] = centre;
+            l.weight[i] = f;
+            sum += f;
+        }
+        for w in l.weight[..n].iter_mut() {
+            *w /= sum;
+        }
+        Ok(l)
+    }
+
+    /// Number of bins.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether there is no bin (never true for a constructed distribution).
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Bin weights.
+    pub fn weights(&self) -> &[R] {
+        &self.weight[..self.n]
+    }
+
+    /// Bin-centre inclination angles (degrees).
+    pub fn angles_deg(&self) -> &[f64] {
+        &self.angle_deg[..self.n]
+    }
+}
+
+/// Sun and view geometry as 4SAIL uses it: angles in radians and their trigonometric values.
+///
+/// The fields are public because the reference implementation runs 4SAIL on an inconsistent
+/// state (see [`SunView::reference_view_transmittance`]); [`SunView::from_degrees`] builds the
+/// consistent one.
+#[derive(Clone, Copy, Debug)]
+pub struct SunView<R> {
+    /// Sun zenith angle (radians).
+    pub tts: R,
+    /// View zenith angle (radians).
+    pub tto: R,
+    /// Relative azimuth (radians).
+    pub psi: R,
+    /// sin(tts).
+    pub sintts: R,
+    /// cos(tts).
+    pub costts: R,
+    /// sin(tto).
+    pub sintto: R,
+    /// cos(tto).
+    pub costto: R,
+    /// cos(psi).
+    pub cospsi: R,
+    /// tan(tts).
+    pub tantts: R,
+    /// tan(tto).
+    pub tantto: R,
+}
+
+impl<R: Real> SunView<R> {
+    /// A consistent geometry from sun zenith, view zenith and relative azimuth in degrees.
+    pub fn from_degrees(tts: R, tto: R, psi: R) -> Self {
+        let d = R::c(PI / 180.0);
+        Self::from_radians(tts * d, tto * d, psi * d)
+    }
+
+    /// A consistent geometry from angles in radians.
+    pub fn from_radians(tts: R, tto: R, psi: R) -> Self {
+        SunView {
+            tts,
+            tto,
+            psi,
+            sintts: tts.sin(),
+            costts: tts.cos(),
+            sintto: tto.sin(),
+            costto: tto.cos(),
+            cospsi: psi.cos(),
+            tantts: tts.tan(),
+            tantto: tto.tan(),
+        }
+    }
+
+    /// The state the reference implementation runs its view-direction "transmittance" call in:
+    /// the sun angle is replaced by the view angle (`tts = tto`, `tan tts = tan tto`), but both
+    /// `sin tts` and `cos tts` are set to `cos tto`. Only [`Geometry::Reference`] uses it.
+    ///
+    /// [`Geometry::Reference`]: super::inform::Geometry::Reference
+    pub fn reference_view_transmittance(&self) -> Self {
+        SunView {
+            tts: self.tto,
+            tantts: self.tantto,
+            sintts: self.costto,
+            costts: self.costto,
+            ..*self
+        }
+    }
+}
+
+/// Geometry × LIDF terms of 4SAIL (no wavelength, no LAI).
+#[derive(Clone, Copy, Debug)]
+pub struct Extinction<R> {
+    /// Extinction coefficient in the sun direction.
+    pub ks: R,
+    /// Extinction coefficient in the view direction.
+    pub ko: R,
+    /// Weighted cos² of the leaf inclination (diffuse backscatter fraction term).
+    pub bf: R,
+    /// Bidirectional backscatter coefficient (multiplies leaf reflectance).
+    pub sob: R,
+    /// Bidirectional forward-scatter coefficient (multiplies leaf transmittance).
+    pub sof: R,
+    /// Hotspot distance `sqrt(tan²tts + tan²tto − 2 tan tts tan tto cos psi)`.
+    pub dso: R,
+}
+
+/// Square root that is zero (with zero derivative) for arguments ≤ 0, so dual numbers stay finite
+/// at the hotspot and at exact zeros.
+#[inline]
+pub(crate) fn sqrt0<R: Real>(x: R) -> R {
+    if x.value() > 0.0 {
+        x.sqrt()
+    } else {
+        R::zero()
+    }
+}
+
+/// Verhoef's volume scattering function for one leaf inclination: interception `chi_s`, `chi_o`
+/// and the fractions `frho`, `ftau` that multiply leaf reflectance and transmittance.
+#[inline]
+fn volscatt<R: Real>(g: &SunView<R>, cttl: f64, sttl: f64) -> (R, R, R, R) {
+    let pi = R::c(PI);
+    let half_pi = R::c(FRAC_PI_2);
+    let cs = g.costts * R::c(cttl);
+    let co = g.costto * R::c(cttl);
+    let ss = g.sintts * R::c(sttl);
+    let so = g.sintto * R::c(sttl);
+    let cosbts = if ss.value().abs() > 1e-6 {
+        -cs / ss
+    } else {
+        R::c(5.0)
+    };
+    let cosbto = if so.value().abs() > 1e-6 {
+        -co / so
+    } else {
+        R::c(5.0)
+    };
+    let (bts, ds) = if cosbts.value().abs() < 1.0 {
+        (cosbts.acos(), ss)
+    } else {
+        (pi, cs)
+    };
+    let chi_s = R::c(2.0 / PI) * ((bts - half_pi) * cs + bts.sin() * ss);
+    let (bto, doo) = if cosbto.value().abs() < 1.0 {
+        (cosbto.acos(), so)
+    } else if g.tto.value() < FRAC_PI_2 {
+        (pi, co)
+    } else {
+        (R::zero(), -co)
+    };
+    let chi_o = R::c(2.0 / PI) * ((bto - half_pi) * co + bto.sin() * so);
+    let btran1 = (bts - bto).abs();
+    let btran2 = pi - (bts + bto - pi).abs();
+    let psi = g.psi;
+    let (bt1, bt2, bt3) = if psi.value() <= btran1.value() {
+        (psi, btran1, btran2)
+    } else if psi.value() <= btran2.value() {
+        (btran1, psi, btran2)
+    } else {
+        (btran1, btran2, psi)
+    };
+    let t1 = R::c(2.0) * cs * co + ss * so * g.cospsi;
+    let t2 = if bt2.value() > 0.0 {
+        bt2.sin() * (R::c(2.0) * ds * doo + ss * so * bt1.cos() * bt3.cos())
+    } else {
+        R::zero()
+    };
+    let denom = R::c(2.0 * PI * PI);
+    let mut frho = ((pi - bt2) * t1 + t2) / denom;
+    let mut ftau = (-bt2 * t1 + t2) / denom;
+    if frho.value() < 0.0 {
+        frho = R::zero();
+    }
+    if ftau.value() < 0.0 {
+        ftau = R::zero();
+    }
+    (chi_s, chi_o, frho, ftau)
+}
+
+/// The geometry × LIDF terms: `volscatt` summed over the inclination bins.
+pub fn extinction<R: Real>(g: &SunView<R>, lidf: &Lidf<R>) -> Extinction<R> {
+    let mut ks = R::zero();
+    let mut ko = R::zero();
+    let mut bf = R::zero();
+    let mut sob = R::zero();
+    let mut sof = R::zero();
+    let ctscto = g.costts * g.costto;
+    for (&a, &w) in lidf.angles_deg().iter().zip(lidf.weights()) {
+        let ttl = a * PI / 180.0;
+        let (cttl, sttl) = (libm::cos(ttl), libm::sin(ttl));
+        let (chi_s, chi_o, frho, ftau) = volscatt(g, cttl, sttl);
+        ks += chi_s / g.costts * w;
+        ko += chi_o / g.costto * w;
+        bf += R::c(cttl * cttl) * w;
+        sob += frho * R::c(PI) / ctscto * w;
+        sof += ftau * R::c(PI) / ctscto * w;
+    }
+    let dso = sqrt0(
+        g.tantts * g.tantts + g.tantto * g.tantto - R::c(2.0) * g.tantts * g.tantto * g.cospsi,
+    );
+    Extinction {
+        ks,
+        ko,
+        bf,
+        sob,
+        sof,
+        dso,
+    }
+}
+
+/// How the hotspot parameter is treated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HotspotRule {
+    /// As the reference: `alf = 2·dso / (hotspot·(ks + ko))` capped at 200, hotspot 0 gives 200,
+    /// 19 integration segments.
+    Reference,
+    /// As published: 20 integration segments, no cap, hotspot 0 gives no hotspot correlation.
+    Physical,
+}
+
+/// Per geometry and LAI terms of one 4SAIL layer (no wavelength).
+#[derive(Clone, Copy, Debug)]
+pub struct Layer<R> {
+    /// Leaf area index.
+    pub lai: R,
+    /// Direct transmittance in the sun direction, exp(−ks·LAI).
+    pub tss: R,
+    /// Direct transmittance in the view direction, exp(−ko·LAI).
+    pub too: R,
+    /// Joint sun-view gap probability including the hotspot correlation.
+    pub tsstoo: R,
+    /// Single-scattering depth integral (hotspot-corrected).
+    pub sumint: R,
+    /// `J2(ks, ko, LAI) = (1 − exp(−(ks + ko)·LAI)) / (ks + ko)`.
+    pub z: R,
+    /// The hotspot parameter `alf` used (for diagnostics).
+    pub alf: R,
+}
+
+/// The layer terms for `lai` (> 0) with hotspot size `hotspot` (leaf size / canopy height).
+pub fn layer<R: Real>(e: &Extinction<R>, lai: R, hotspot: R, rule: HotspotRule) -> Layer<R> {
+    let one = R::one();
+    let tss = (-e.ks * lai).exp();
+    let too = (-e.ko * lai).exp();
+    let kk = e.ks + e.ko;
+    let z = (one - (-kk * lai).exp()) / kk;
+    // The reference integrates in 19 segments (its 19th abscissa is overwritten by 1), the
+    // published model in 20.
+    let segments = match rule {
+        HotspotRule::Reference => 19,
+        HotspotRule::Physical => 20,
+    };
+    let with_alf = |alf: R| -> (R, R) {
+        if alf.value() == 0.0 {
+            // The pure hotspot: sun and view paths coincide.
+            return (tss, (one - tss) / (e.ks * lai));
+        }
+        let fhot = lai * (e.ko * e.ks).sqrt();
+        let fint = (one - (-alf).exp()) * R::c(0.05);
+        let (mut x1, mut y1, mut f1) = (R::zero(), R::zero(), one);
+        let mut sumint = R::zero();
+        for istep in 1..=segments {
+            let x2 = if istep < segments {
+                -(one - R::c(istep as f64) * fint).ln() / alf
+            } else {
+                one
+            };
+            let y2 = -kk * lai * x2 + fhot * (one - (-alf * x2).exp()) / alf;
+            let f2 = y2.exp();
+            sumint += (f2 - f1) * (x2 - x1) / (y2 - y1);
+            x1 = x2;
+            y1 = y2;
+            f1 = f2;
+        }
+        (f1, sumint)
+    };
+    let (alf, tsstoo, sumint) = match rule {
+        HotspotRule::Reference => {
+            let mut alf = if hotspot.value() > 0.0 {
+                e.dso / hotspot * R::c(2.0) / kk
+            } else {
+                R::c(REFERENCE_ALF_CAP)
+            };
+            if alf.value() > REFERENCE_ALF_CAP {
+                alf = R::c(REFERENCE_ALF_CAP);
+            }
+            let (t, s) = with_alf(alf);
+            (alf, t, s)
+        }
+        HotspotRule::Physical => {
+            if hotspot.value() > 0.0 {
+                let alf = e.dso / hotspot * R::c(2.0) / kk;
+                let (t, s) = with_alf(alf);
+                (alf, t, s)
+            } else {
+                // No hotspot correlation: the limit alf → ∞ of the integral.
+                let t = tss * too;
+                (R::c(f64::INFINITY), t, (one - t) / (kk * lai))
+            }
+        }
+    };
+    Layer {
+        lai,
+        tss,
+        too,
+        tsstoo,
+        sumint,
+        z,
+        alf,
+    }
+}
+
+/// Per wavelength terms of the leaf medium that do not depend on sun or view (only on `bf`).
+#[derive(Clone, Copy, Debug)]
+pub struct Medium<R> {
+    /// Leaf reflectance.
+    pub rho: R,
+    /// Leaf transmittance.
+    pub tau: R,
+    /// Diffuse backscatter coefficient.
+    pub sigb: R,
+    /// Diffuse attenuation `1 − sigf`.
+    pub att: R,
+    /// Attenuation eigenvalue `sqrt(att² − sigb²)`.
+    pub m: R,
+    /// Reflectance of an infinitely thick layer.
+    pub rinf: R,
+}
+
+/// The medium terms from leaf optics and the LIDF's `bf`.
+#[inline]
+pub fn medium<R: Real>(bf: R, leaf: LeafOptics<R>) -> Medium<R> {
+    let one = R::one();
+    let half = R::c(0.5);
+    let ddb = half * (one + bf);
+    let ddf = half * (one - bf);
+    let rho = leaf.refl;
+    let tau = leaf.trans;
+    let sigb = ddb * rho + ddf * tau;
+    let sigf = ddf * rho + ddb * tau;
+    let att = one - sigf;
+    let m = sqrt0((att + sigb) * (att - sigb));
+    let rinf = (att - m) / sigb;
+    Medium {
+        rho,
+        tau,
+        sigb,
+        att,
+        m,
+        rinf,
+    }
+}
+
+/// Outputs of 4SAIL for one layer over a Lambertian background at one wavelength.
+#[derive(Clone, Copy, Debug)]
+pub struct SailOutput<R> {
+    /// Bidirectional reflectance factor of canopy + background.
+    pub rsot: R,
+    /// Hemispherical-directional reflectance factor (diffuse in, view direction out).
+    pub rdot: R,
+    /// Directional-hemispherical reflectance factor (sun in, hemisphere out).
+    pub rsdt: R,
+    /// Bihemispherical reflectance factor.
+    pub rddt: R,
+    /// Layer: direct transmittance, sun direction.
+    pub tss: R,
+    /// Layer: direct transmittance, view direction.
+    pub too: R,
+    /// Layer: directional (sun) to diffuse transmittance.
+    pub tsd: R,
+    /// Layer: diffuse to directional (view) transmittance.
+    pub tdo: R,
+    /// Layer: diffuse transmittance.
+    pub tdd: R,
+    /// Layer: diffuse reflectance.
+    pub rdd: R,
+}
+
+/// `J1(k, l, t) = (e^(−l t) − e^(−k t)) / (k − l)` with its series form near `k = l`, given
+/// `elt = e^(−l t)` and `ekt = e^(−k t)`.
+#[inline]
+fn jfunc1<R: Real>(k: R, l: R, t: R, elt: R, ekt: R) -> R {
+    let kl = k - l;
+    let del = kl * t;
+    if del.value().abs() > J1_SERIES_THRESHOLD {
+        (elt - ekt) / kl
+    } else {
+        R::c(0.5) * t * (ekt + elt) * (R::one() - del * del / R::c(12.0))
+    }
+}
+
+/// 4SAIL at one wavelength: layer `l` (geometry `e`) of medium `md` over background reflectance
+/// `soil`.
+#[inline]
+pub fn sail<R: Real>(e: &Extinction<R>, l: &Layer<R>, md: &Medium<R>, soil: R) -> SailOutput<R> {
+    let one = R::one();
+    let half = R::c(0.5);
+    let (rho, tau, m, rinf) = (md.rho, md.tau, md.m, md.rinf);
+    let sdb = half * (e.ks + e.bf);
+    let sdf = half * (e.ks - e.bf);
+    let dob = half * (e.ko + e.bf);
+    let dof = half * (e.ko - e.bf);
+    let sb = sdb * rho + sdf * tau;
+    let sf = sdf * rho + sdb * tau;
+    let vb = dob * rho + dof * tau;
+    let vf = dof * rho + dob * tau;
+    let w = e.sob * rho + e.sof * tau;
+
+    let lai = l.lai;
+    let e1 = (-m * lai).exp();
+    let e2 = e1 * e1;
+    let rinf2 = rinf * rinf;
+    let re = rinf * e1;
+    let denom = one - rinf2 * e2;
+
+    let j1ks = jfunc1(e.ks, m, lai, e1, l.tss);
+    let j2ks = (one - (-(e.ks + m) * lai).exp()) / (e.ks + m);
+    let j1ko = jfunc1(e.ko, m, lai, e1, l.too);
+    let j2ko = (one - (-(e.ko + m) * lai).exp()) / (e.ko + m);
+
+    let ps = (sf + sb * rinf) * j1ks;
+    let qs = (sf * rinf + sb) * j2ks;
+    let pv = (vf + vb * rinf) * j1ko;
+    let qv = (vf * rinf + vb) * j2ko;
+
+    let rdd = rinf * (one - e2) / denom;
+    let tdd = (one - rinf2) * e1 / denom;
+    let tsd = (ps - re * qs) / denom;
+    let rsd = (qs - re * ps) / denom;
+    let tdo = (pv - re * qv) / denom;
+    let rdo = (qv - re * pv) / denom;
+
+    let g1 = (l.z - j1ks * l.too) / (e.ko + m);
+    let g2 = (l.z - j1ko * l.tss) / (e.ks + m);
+    let tv1 = (vf * rinf + vb) * g1;
+    let tv2 = (vf + vb * rinf) * g2;
+    let t1 = tv1 * (sf + sb * rinf);
+    let t2 = tv2 * (sf * rinf + sb);
+    let t3 = (rdo * qs + tdo * ps) * rinf;
+    let rsod = (t1 + t2 - t3) / (one - rinf2);
+    let rsos = w * lai * l.sumint;
+
+    let dn = one - soil * rdd;
+    let tdd_dn = tdd / dn;
+    let rdot = rdo + soil * (tdo + l.too) * tdd_dn;
+    let rsodt = rsod + ((l.tss + tsd) * tdo + (tsd + l.tss * soil * rdd) * l.too) * soil / dn;
+    let rsost = rsos + l.tsstoo * soil;
+    let rsot = rsost + rsodt;
+    let rsdt = rsd + (tsd + l.tss) * soil * tdd_dn;
+    let rddt = rdd + tdd * soil * tdd_dn;
+    SailOutput {
+        rsot,
+        rdot,
+        rsdt,
+        rddt,
+        tss: l.tss,
+        too: l.too,
+        tsd,
+        tdo,
+        tdd,
+        rdd,
+    }
+}
+
+/// Fraction of diffuse (sky) irradiance for sun zenith `tts` in radians (François et al. 2002):
+/// `0.847 − 1.61·sin(90° − tts) + 1.04·sin²(90° − tts)`.
+#[inline]
+pub fn skyl<R: Real>(tts: R) -> R {
+    let s = (R::c(FRAC_PI_2) - tts).sin();
+    R::c(0.847) - R::c(1.61) * s + R::c(1.04) * s * s
+}
+
+/// Reflectance under mixed direct (`es`) and diffuse (`ed`) irradiance with diffuse fraction
+/// `skyl`: `(rdot·skyl·ed + rsot·(1 − skyl)·es) / ((1 − skyl)·es + skyl·ed)`.
+#[inline]
+pub fn mixed_reflectance<R: Real>(rsot: R, rdot: R, skyl: R, es: f64, ed: f64) -> R {
+    let dir = (R::one() - skyl) * R::c(es);
+    let dif = skyl * R::c(ed);
+    (rdot * dif + rsot * dir) / (dir + dif)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::real::Dual;
+
+    const UNIFORM: [f64; 13] = [
+        0.1111111, 0.1111111, 0.1111111, 0.1111111, 0.1111111, 0.1111111, 0.1111111, 0.1111111,
+        0.0222222, 0.0222222, 0.0222222, 0.0222222, 0.0222222,
+    ];
+
+    fn uniform() -> Lidf<f64> {
+        Lidf::from_beta_table(&UNIFORM, 0).unwrap()
+    }
+
+    fn leaf() -> LeafOptics<f64> {
+        LeafOptics {
+            refl: 0.45,
+            trans: 0.45,
+        }
+    }
+
+    fn run(
+        tts: f64,
+        tto: f64,
+        psi: f64,
+        lai: f64,
+        hot: f64,
+        soil: f64,
+        lidf: &Lidf<f64>,
+    ) -> SailOutput<f64> {
+        let g = SunView::from_degrees(tts, tto, psi);
+        let e = extinction(&g, lidf);
+        let l = layer(&e, lai, hot, HotspotRule::Physical);
+        sail(&e, &l, &medium(e.bf, leaf()), soil)
+    }
+
+    #[test]
+    fn campbell_is_normalised_and_shifts_with_angle() {
+        for bins in [CampbellBins::Reference13, CampbellBins::Uniform18] {
+            for &ala in &[10.0, 30.0, 57.0, 70.0, 85.0] {
+                let l = Lidf::campbell(ala, bins).unwrap();
+                let s: f64 = l.weights().iter().sum();
+                assert!((s - 1.0).abs() < 1e-12);
+                assert!(l.weights().iter().all(|w| *w >= 0.0));
+            }
+            let mean = |ala: f64| {
+                let l = Lidf::campbell(ala, bins).unwrap();
+                l.weights()
+                    .iter()
+                    .zip(l.angles_deg())
+                    .map(|(w, a)| w * a)
+                    .sum::<f64>()
+            };
+            assert!(mean(20.0) < mean(45.0) && mean(45.0) < mean(70.0));
+        }
+        assert!(Lidf::<f64>::campbell(95.0, CampbellBins::Uniform18).is_err());
+        assert!(Lidf::<f64>::campbell(f64::NAN, CampbellBins::Uniform18).is_err());
+    }
+
+    #[test]
+    fn beta_table_errors() {
+        assert!(Lidf::<f64>::from_beta_table(&UNIFORM, 1).is_err());
+        assert!(Lidf::<f64>::from_beta_table(&UNIFORM[..12], 0).is_err());
+        assert!(Lidf::<f64>::from_beta_table(&[], 0).is_err());
+    }
+
+    #[test]
+    fn spherical_extinction_is_half_over_cos() {
+        // A near-spherical distribution (Campbell, ala ≈ 57°) has G ≈ 0.5 in every direction.
+        let l = Lidf::campbell(57.3, CampbellBins::Uniform18).unwrap();
+        for &tts in &[0.0, 20.0, 45.0, 60.0] {
+            let e = extinction(&SunView::from_degrees(tts, 10.0, 0.0), &l);
+            let want = 0.5 / libm::cos(tts * PI / 180.0);
+            assert!(
+                (e.ks - want).abs() < 0.05 * want,
+                "tts {tts}: {} vs {want}",
+                e.ks
+            );
+        }
+    }
+
+    #[test]
+    fn reflectances_are_bounded_and_soil_dominates_thin_canopies() {
+        let l = uniform();
+        for &lai in &[0.01, 0.5, 3.0, 15.0] {
+            let o = run(30.0, 10.0, 45.0, lai, 0.05, 0.2, &l);
+            for r in [o.rsot, o.rdot, o.rsdt, o.rddt] {
+                assert!(r > 0.0 && r < 1.0, "{o:?}");
+            }
+        }
+        let thin = run(30.0, 10.0, 45.0, 1e-4, 0.05, 0.2, &l);
+        assert!((thin.rddt - 0.2).abs() < 1e-3 && (thin.rsot - 0.2).abs() < 1e-3);
+    }
+
+    #[test]
+    fn reciprocity_of_sun_and_view() {
+        // Swapping sun and view leaves rsot unchanged (Helmholtz reciprocity of 4SAIL).
+        let l = Lidf::campbell(40.0, CampbellBins::Uniform18).unwrap();
+        let a = run(35.0, 15.0, 60.0, 2.0, 0.1, 0.15, &l);
+        let b = run(15.0, 35.0, 60.0, 2.0, 0.1, 0.15, &l);
+        assert!((a.rsot - b.rsot).abs() < 1e-12, "{} {}", a.rsot, b.rsot);
+        assert!((a.rdot - b.rsdt).abs() < 1e-12, "{} {}", a.rdot, b.rsdt);
+    }
+
+    #[test]
+    fn jfunc1_branches_agree() {
+        let (k, t) = (0.7, 2.0);
+        for &l in &[0.7 - 6e-4, 0.7 - 4e-4, 0.7 + 4e-4, 0.7 + 6e-4] {
+            let exact = (libm::exp(-l * t) - libm::exp(-k * t)) / (k - l);
+            let j = jfunc1(k, l, t, libm::exp(-l * t), libm::exp(-k * t));
+            assert!((j - exact).abs() < 1e-9, "{j} {exact}");
+        }
+    }
+
+    #[test]
+    fn hotspot_rules() {
+        let l = uniform();
+        let e = extinction(&SunView::from_degrees(30.0, 0.0, 0.0), &l);
+        let none = layer(&e, 2.0, 0.0, HotspotRule::Physical);
+        assert!((none.tsstoo - none.tss * none.too).abs() < 1e-15);
+        let r = layer(&e, 2.0, 0.0, HotspotRule::Reference);
+        assert_eq!(r.alf, REFERENCE_ALF_CAP);
+        // A large alf converges to the no-hotspot limit.
+        let big = layer(&e, 2.0, 1e-6, HotspotRule::Physical);
+        assert!((big.tsstoo - none.tsstoo).abs() < 1e-5);
+        assert!(
+            (big.sumint - none.sumint).abs() < 1e-6,
+            "{} {}",
+            big.sumint,
+            none.sumint
+        );
+        // In the exact hotspot direction tsstoo = tss.
+        let e0 = extinction(&SunView::from_degrees(30.0, 30.0, 0.0), &l);
+        let h = layer(&e0, 2.0, 0.1, HotspotRule::Physical);
+        assert!((h.tsstoo - h.tss).abs() < 1e-15);
+    }
+
+    #[test]
+    fn dual_lai_derivative() {
+        let l: Lidf<Dual<1>> = Lidf::from_beta_table(&UNIFORM, 0).unwrap();
+        let g = SunView::from_degrees(Dual::c(30.0), Dual::c(5.0), Dual::c(20.0));
+        let e = extinction(&g, &l);
+        let f = |lai: Dual<1>| {
+            let ly = layer(&e, lai, Dual::c(0.05), HotspotRule::Reference);
+            let md = medium(
+                e.bf,
+                LeafOptics {
+                    refl: Dual::c(0.45),
+                    trans: Dual::c(0.4),
+                },
+            );
+            sail(&e, &ly, &md, Dual::c(0.2)).rsot
+        };
+        let d = f(Dual::var(1.3, 0)).d[0];
+        let h = 1e-6;
+        let fd = (f(Dual::c(1.3 + h)).v - f(Dual::c(1.3 - h)).v) / (2.0 * h);
+        assert!((d - fd).abs() < 1e-7, "{d} {fd}");
+    }
+}

@@ -1,0 +1,207 @@
+//! Band integration: a sensor's spectral response as a resampling matrix.
+//!
+//! Band `b` of a spectrum `R(λ)` sampled on the model's wavelength grid is
+//! `Σ_λ M[λ, b]·R(λ)`, with `M` a borrowed `n_wavelengths × n_bands` row-major matrix whose columns
+//! sum to 1 (`sentinel2_full_resampling_matrix.csv` for Sentinel-2). Most of `M` is zero, so
+//! [`Resampling::new`] records the wavelength spans where any band has weight and the model is
+//! evaluated only there (884 of 2101 wavelengths for Sentinel-2).
+
+use crate::real::Real;
+use crate::Error;
+
+/// Sentinel-2 band names in the order of the resampling matrix's columns.
+pub const S2_BANDS: [&str; 13] = [
+    "B01", "B02", "B03", "B04", "B05", "B06", "B07", "B08", "B8A", "B09", "B10", "B11", "B12",
+];
+
+/// Largest number of bands a [`Resampling`] handles.
+pub const MAX_BANDS: usize = 16;
+
+/// A resampling matrix with the wavelength spans where it is non-zero.
+#[derive(Clone, Copy, Debug)]
+pub struct Resampling<'a> {
+    matrix: &'a [f64],
+    n_wl: usize,
+    n_bands: usize,
+    spans: [(usize, usize); MAX_BANDS],
+    n_spans: usize,
+}
+
+impl<'a> Resampling<'a> {
+    /// Wraps `matrix` (`n_wl × n_bands`, row-major). Fails when the length does not match, a
+    /// weight is not finite, or `n_bands` is 0 or above [`MAX_BANDS`].
+    pub fn new(matrix: &'a [f64], n_wl: usize, n_bands: usize) -> Result<Self, Error> {
+        if n_bands == 0 || n_bands > MAX_BANDS {
+            return Err(Error::OutOfRange {
+                what: "number of sensor bands",
+            });
+        }
+        if matrix.len() != n_wl * n_bands {
+            return Err(Error::SizeMismatch {
+                what: "resampling matrix",
+                expected: n_wl * n_bands,
+                found: matrix.len(),
+            });
+        }
+        if let Some(i) = matrix.iter().position(|w| !w.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "resampling matrix",
+                index: i,
+            });
+        }
+        // Per band: first and last wavelength with non-zero weight.
+        let mut ranges = [(usize::MAX, 0usize); MAX_BANDS];
+        for (i, row) in matrix.chunks_exact(n_bands).enumerate() {
+            for (b, &w) in row.iter().enumerate() {
+                if w != 0.0 {
+                    let r = &mut ranges[b];
+                    r.0 = r.0.min(i);
+                    r.1 = r.1.max(i);
+                }
+            }
+        }
+        // Sort the band ranges by start and merge overlapping or adjacent ones.
+        let mut list = [(usize::MAX, 0usize); MAX_BANDS];
+        let mut n = 0;
+        for r in ranges[..n_bands].iter().filter(|r| r.0 != usize::MAX) {
+            list[n] = *r;
+            n += 1;
+        }
+        list[..n].sort_unstable();
+        let mut spans = [(0usize, 0usize); MAX_BANDS];
+        let mut n_spans = 0;
+        for &(a, b) in &list[..n] {
+            if n_spans > 0 && a <= spans[n_spans - 1].1 + 1 {
+                let last = &mut spans[n_spans - 1];
+                last.1 = last.1.max(b);
+            } else {
+                spans[n_spans] = (a, b);
+                n_spans += 1;
+            }
+        }
+        Ok(Resampling {
+            matrix,
+            n_wl,
+            n_bands,
+            spans,
+            n_spans,
+        })
+    }
+
+    /// Number of bands.
+    pub fn n_bands(&self) -> usize {
+        self.n_bands
+    }
+
+    /// Number of wavelengths of the grid.
+    pub fn n_wavelengths(&self) -> usize {
+        self.n_wl
+    }
+
+    /// Inclusive wavelength-index spans where some band has weight.
+    pub fn spans(&self) -> &[(usize, usize)] {
+        &self.spans[..self.n_spans]
+    }
+
+    /// The weights of wavelength index `i` (one per band).
+    #[inline]
+    pub fn weights(&self, i: usize) -> &[f64] {
+        &self.matrix[i * self.n_bands..(i + 1) * self.n_bands]
+    }
+
+    /// Number of wavelengths where some band has weight.
+    pub fn n_active(&self) -> usize {
+        self.spans()
+            .iter()
+            .flat_map(|&(a, b)| a..=b)
+            .filter(|&i| self.weights(i).iter().any(|&w| w != 0.0))
+            .count()
+    }
+
+    /// Integrates a spectrum given as a function of the wavelength index, evaluating it only
+    /// where some band has weight; `out` (length `n_bands`) receives the band values.
+    pub fn integrate<R: Real>(
+        &self,
+        mut spectrum: impl FnMut(usize) -> R,
+        out: &mut [R],
+    ) -> Result<(), Error> {
+        if out.len() != self.n_bands {
+            return Err(Error::SizeMismatch {
+                what: "band output",
+                expected: self.n_bands,
+                found: out.len(),
+            });
+        }
+        for o in out.iter_mut() {
+            *o = R::zero();
+        }
+        for &(a, b) in self.spans() {
+            for i in a..=b {
+                let w = self.weights(i);
+                if w.iter().all(|&x| x == 0.0) {
+                    continue;
+                }
+                let r = spectrum(i);
+                for (o, &wb) in out.iter_mut().zip(w) {
+                    if wb != 0.0 {
+                        *o += R::c(wb) * r;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Integrates a full spectrum (`n_wavelengths` values).
+    pub fn integrate_slice<R: Real>(&self, spectrum: &[R], out: &mut [R]) -> Result<(), Error> {
+        if spectrum.len() != self.n_wl {
+            return Err(Error::SizeMismatch {
+                what: "spectrum",
+                expected: self.n_wl,
+                found: spectrum.len(),
+            });
+        }
+        self.integrate(|i| spectrum[i], out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spans_and_integration() {
+        // 6 wavelengths, 2 bands: band 0 on 1..=2, band 1 on 4..=4.
+        let m = [0.0, 0.0, 0.5, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+        let r = Resampling::new(&m, 6, 2).unwrap();
+        assert_eq!(r.spans(), &[(1, 2), (4, 4)]);
+        assert_eq!(r.n_active(), 3);
+        let mut calls = 0;
+        let mut out = [0.0; 2];
+        r.integrate(
+            |i| {
+                calls += 1;
+                i as f64
+            },
+            &mut out,
+        )
+        .unwrap();
+        assert_eq!(calls, 3);
+        assert_eq!(out, [1.5, 4.0]);
+        let mut out2 = [0.0; 2];
+        r.integrate_slice(&[0.0, 1.0, 2.0, 3.0, 4.0, 5.0], &mut out2)
+            .unwrap();
+        assert_eq!(out, out2);
+    }
+
+    #[test]
+    fn size_errors() {
+        let m = [0.0; 12];
+        assert!(Resampling::new(&m, 5, 2).is_err());
+        assert!(Resampling::new(&m, 12, 0).is_err());
+        assert!(Resampling::new(&[f64::NAN, 1.0], 1, 2).is_err());
+        let r = Resampling::new(&m, 6, 2).unwrap();
+        assert!(r.integrate(|_| 0.0, &mut [0.0; 3]).is_err());
+        assert!(r.integrate_slice(&[0.0; 5], &mut [0.0; 2]).is_err());
+    }
+}
