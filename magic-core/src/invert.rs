@@ -103,7 +103,7 @@ pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Re
         flags.0 |= Flags::MISSING;
     }
     let groups = match &model.problem {
-        Problem::Mogi { stations } => stations.len(),
+        Problem::Mogi { stations, .. } => stations.len(),
         Problem::Rtm => n_obs,
     };
     let per_group = n_obs / groups.max(1);
@@ -190,7 +190,7 @@ pub fn model_encoder(model: &Model<'_>, z: &[f32], out: &mut [f32], ws: &mut Wor
 /// The model's forward model F: physical variables → observations in physical units.
 pub fn forward<R: Real>(model: &Model<'_>, params: &[R], out: &mut [R]) -> Result<(), Error> {
     match &model.problem {
-        Problem::Mogi { stations } => {
+        Problem::Mogi { stations, .. } => {
             let p: [R; mogi::N_PARAMS] = params
                 .get(..mogi::N_PARAMS)
                 .and_then(|s| s.try_into().ok())

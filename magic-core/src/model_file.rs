@@ -48,6 +48,8 @@ pub enum Problem {
     Mogi {
         /// Station positions, in the order of the observation channels.
         stations: heapless::Vec<Station, MAX_STATIONS>,
+        /// Station names (e.g. `AV08`), in the same order; the data columns are `ux_<NAME>` etc.
+        names: heapless::Vec<heapless::String<8>, MAX_STATIONS>,
     },
     /// INFORM forest reflectance observed in spectral bands.
     Rtm,
@@ -102,7 +104,7 @@ impl<'a> Model<'a> {
     /// Stations of a Mogi model.
     pub fn stations(&self) -> Result<&[Station], Error> {
         match &self.problem {
-            Problem::Mogi { stations } => Ok(stations),
+            Problem::Mogi { stations, .. } => Ok(stations),
             _ => Err(Error::WrongProblem),
         }
     }
@@ -169,7 +171,10 @@ impl<'a> Model<'a> {
             return Err(Error::InvalidModel("residual threshold not finite and non-negative"));
         }
         let n_phys = match &self.problem {
-            Problem::Mogi { stations } => {
+            Problem::Mogi { stations, names } => {
+                if names.len() != stations.len() {
+                    return Err(Error::SizeMismatch { what: "station names", expected: stations.len(), found: names.len() });
+                }
                 if stations.is_empty() {
                     return Err(Error::InvalidModel("no stations"));
                 }

@@ -14,13 +14,17 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::sync::Arc;
 
-/// The Mogi problem description of a dataset.
-pub fn mogi_problem(stations: &[Station]) -> Result<Problem> {
+/// The Mogi problem description of a network.
+pub fn mogi_problem(names: &[String], stations: &[Station]) -> Result<Problem> {
     let mut v = heapless::Vec::new();
-    for s in stations {
+    let mut n = heapless::Vec::new();
+    for (name, s) in names.iter().zip(stations) {
         v.push(*s).map_err(|_| anyhow!("more stations than the core supports ({})", magic_core::model_file::MAX_STATIONS))?;
+        let mut hs = heapless::String::new();
+        hs.push_str(name).map_err(|_| anyhow!("station name `{name}` is longer than 8 characters"))?;
+        n.push(hs).map_err(|_| anyhow!("too many stations"))?;
     }
-    Ok(Problem::Mogi { stations: v })
+    Ok(Problem::Mogi { stations: v, names: n })
 }
 
 /// Trains a Mogi model of `variant` on `data` and returns it as an f32 model with its log.
@@ -39,7 +43,7 @@ pub fn train_mogi(data: &GnssData, variant: Variant, cfg: &TrainConfig, seed: u6
         &mut rng,
     )?;
     let log = train(&net, &data.train.x, &data.valid.x, cfg, &mut rng)?;
-    let mut model = OwnedModel::from_net(&net, mogi_problem(&data.stations)?)?;
+    let mut model = OwnedModel::from_net(&net, mogi_problem(&data.names, &data.stations)?)?;
     model.residual_threshold = residual_threshold(&model, &data.valid.x)?;
     Ok((model, log))
 }
