@@ -51,8 +51,8 @@
 
 use super::prospect::{leaf_optics, CoefRow, Leaf, LeafOptics};
 use super::sail::{
-    extinction, layer, medium, mixed_reflectance, sail, skyl, sqrt0, Extinction, HotspotRule,
-    Layer, Lidf, SailOutput, SunView,
+    extinction, layer, medium, mixed_reflectance, sail, skyl, sqrt0, tan_distance, Extinction,
+    HotspotRule, Layer, Lidf, SailOutput, SunView,
 };
 use crate::real::Real;
 use core::f64::consts::PI;
@@ -100,8 +100,7 @@ pub fn crown_geometry<R: Real>(cd: R, sd: R, h: R, tts: R, tto: R, psi: R) -> Cr
     let k = R::c(PI) * half * half / R::c(10_000.0);
     let co = one - (-k * sd / tto.cos()).exp();
     let cs = one - (-k * sd / tts.cos()).exp();
-    let (tto_t, tts_t) = (tto.tan(), tts.tan());
-    let g = sqrt0(tto_t * tto_t + tts_t * tts_t - R::c(2.0) * tto_t * tts_t * psi.cos());
+    let g = tan_distance(tto.tan(), tts.tan(), psi);
     let p = (-g * h / cd).exp();
     let q = p * sqrt0(co * (one - co) * cs * (one - cs));
     CrownGeometry {

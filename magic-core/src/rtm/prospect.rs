@@ -186,19 +186,24 @@ pub fn leaf_optics<R: Real>(c: &CoefRow, leaf: &Leaf<R>) -> LeafOptics<R> {
     let r90 = (ra - y) / x;
     let t90 = ta / x;
 
-    // Stokes' equations for the remaining N − 1 layers.
+    // Stokes' equations for the remaining N − 1 layers, in a cancellation-free form (the textbook
+    // form loses up to 4 digits in β − r90 when the plate is nearly opaque, too many for f32):
+    //   A = 1 + r² − t²,  B = 1 − r² + t²,  δ = sqrt(A² − 4r²) = sqrt((1 − (r+t)²)(1 − (r−t)²)),
+    //   va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = (1 − r² − t² + δ)/(2r),
+    //   va·(β − r) = 2t²/(B + δ).
     let t90_2 = t90 * t90;
     let r90_2 = r90 * r90;
-    let d0 = t90_2 - r90_2 - one;
-    let delta = (d0 * d0 - R::c(4.0) * r90_2).sqrt();
+    let delta = ((one - (r90 + t90) * (r90 + t90)) * (one - (r90 - t90) * (r90 - t90))).sqrt();
+    let a_plus = one + r90_2 - t90_2 + delta;
     let two_r90 = R::c(2.0) * r90;
-    let beta = (one + r90_2 - t90_2 - delta) / two_r90;
-    let va = (one + r90_2 - t90_2 + delta) / two_r90;
-    let vden = va * (beta - r90);
+    let va = a_plus / two_r90;
+    let beta = two_r90 / a_plus;
+    let va_minus_r = (one - r90_2 - t90_2 + delta) / two_r90;
+    let vden = R::c(2.0) * t90_2 / (one - r90_2 + t90_2 + delta);
     let vb = if vden.value() <= VB_FLOOR {
-        (beta * (va - r90) / R::c(VB_FLOOR)).sqrt()
+        (beta * va_minus_r / R::c(VB_FLOOR)).sqrt()
     } else {
-        (beta * (va - r90) / vden).sqrt()
+        (beta * va_minus_r / vden).sqrt()
     };
     let vbnn = vb.powf(leaf.n - one);
     let vbnn_inv = one / vbnn;

@@ -295,6 +295,16 @@ pub(crate) fn sqrt0<R: Real>(x: R) -> R {
     }
 }
 
+/// `sqrt(tan²a + tan²b − 2 tan a tan b cos ψ)` given `tan a`, `tan b` and ψ, evaluated as
+/// `sqrt((tan a − tan b)² + 4 tan a tan b sin²(ψ/2))`, which does not cancel when ψ is small or
+/// the two directions nearly coincide (f32 loses every digit in the textbook form there).
+#[inline]
+pub(crate) fn tan_distance<R: Real>(ta: R, tb: R, psi: R) -> R {
+    let d = ta - tb;
+    let s = (psi * R::c(0.5)).sin();
+    sqrt0(d * d + R::c(4.0) * ta * tb * s * s)
+}
+
 /// Verhoef's volume scattering function for one leaf inclination: interception `chi_s`, `chi_o`
 /// and the fractions `frho`, `ftau` that multiply leaf reflectance and transmittance.
 #[inline]
@@ -375,9 +385,7 @@ pub fn extinction<R: Real>(g: &SunView<R>, lidf: &Lidf<R>) -> Extinction<R> {
         sob += frho * R::c(PI) / ctscto * w;
         sof += ftau * R::c(PI) / ctscto * w;
     }
-    let dso = sqrt0(
-        g.tantts * g.tantts + g.tantto * g.tantto - R::c(2.0) * g.tantts * g.tantto * g.cospsi,
-    );
+    let dso = tan_distance(g.tantts, g.tantto, g.psi);
     Extinction {
         ks,
         ko,
