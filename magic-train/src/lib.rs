@@ -4,10 +4,14 @@
 //! as a differentiable op, training, int8 export, evaluation and the `magic` command line.
 
 pub mod data;
+pub mod demo;
+pub mod demo_qemu;
 pub mod eval;
 pub mod export;
 pub mod nets;
 pub mod physics;
+pub mod records;
+pub mod synth;
 pub mod pipeline;
 pub mod train;
 

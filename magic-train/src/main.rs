@@ -4,7 +4,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use magic_core::{Model, Variant};
 use magic_train::data::{self, gnss::GnssData};
-use magic_train::{evaluate, pipeline, OwnedModel, TrainConfig};
+use magic_train::{demo, evaluate, pipeline, records, synth, OwnedModel, TrainConfig};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -70,6 +70,74 @@ enum Cmd {
         /// Output model file.
         #[arg(long)]
         out: PathBuf,
+    },
+    /// Invert observations on the host (physics in f64).
+    Invert {
+        /// Model file.
+        #[arg(long)]
+        model: PathBuf,
+        /// Observation CSV with columns `ux_<STA>` … in mm (or standardised with --standardized).
+        #[arg(long)]
+        input: PathBuf,
+        /// Result CSV.
+        #[arg(long)]
+        output: PathBuf,
+        /// The input holds standardised values (the data files as they are).
+        #[arg(long)]
+        standardized: bool,
+    },
+    /// Evaluate a forward model.
+    Forward {
+        #[command(subcommand)]
+        problem: ForwardProblem,
+    },
+    /// Write a synthetic GNSS dataset in the release layout.
+    Synth {
+        /// Scenario (`clean`, or an injected effect family).
+        #[arg(long, default_value = "clean")]
+        scenario: String,
+        /// Random seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// The main job: train C and B, evaluate, export int8, run the test days on the firmware.
+    Demo {
+        /// Data folder laid out like `shared/data/gnss` (default: $MAGIC_DATA/gnss, ../shared/data/gnss,
+        /// else a built-in synthetic dataset).
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Random seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Maximum epochs.
+        #[arg(long, default_value_t = 100)]
+        epochs: usize,
+        /// Folder for the model files and results.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+        /// Skip the firmware run under QEMU.
+        #[arg(long)]
+        no_qemu: bool,
+    },
+}
+
+#[derive(Subcommand)]
+enum ForwardProblem {
+    /// Mogi displacements (mm) at the network's stations for rows of
+    /// `xcen_km, ycen_km, d_km, dV_1e6m3`.
+    Mogi {
+        /// Input CSV.
+        #[arg(long)]
+        input: PathBuf,
+        /// Output CSV (`ux_<STA>` ×S, `uy_<STA>` ×S, `uz_<STA>` ×S).
+        #[arg(long)]
+        output: PathBuf,
+        /// Network: a `stations.json` (default: the built-in Akutan network).
+        #[arg(long)]
+        stations: Option<PathBuf>,
     },
 }
 
@@ -174,6 +242,89 @@ fn run(cli: Cli) -> Result<()> {
             std::fs::write(&out, &qb).with_context(|| format!("{}: cannot write", out.display()))?;
             eprintln!("exported int8 model: {} bytes -> {}", qb.len(), out.display());
         }
+        Cmd::Invert { model, input, output, standardized } => {
+            let bytes = read_model(&model)?;
+            let m = decode(&model, &bytes)?;
+            let rows = records::read_obs(&input, &m, standardized)?;
+            let lines = records::invert_rows(&m, &rows);
+            report_row_errors(&rows);
+            records::write_results(&output, &m, &rows, &lines)?;
+            let bad = lines.iter().filter(|l| l.starts_with("error,")).count();
+            eprintln!("inverted {} rows ({} errors) -> {}", lines.len(), bad, output.display());
+            if bad > 0 {
+                bail!("{bad} of {} rows could not be inverted (error rows written)", lines.len());
+            }
+        }
+        Cmd::Forward { problem: ForwardProblem::Mogi { input, output, stations } } => {
+            forward_mogi(&input, &output, stations.as_deref())?;
+        }
+        Cmd::Synth { scenario, seed, out } => {
+            let sc = synth::Scenario::parse(&scenario)?;
+            let s = synth::generate(sc, seed);
+            synth::write_dir(&s.data, &out)?;
+            std::fs::write(out.join("truth.json"), serde_json::to_string_pretty(&s.truth)?)?;
+            eprintln!("wrote synthetic dataset ({}) -> {}", s.data.source, out.display());
+        }
+        Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
+            demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
+        }
     }
     Ok(())
+}
+
+fn report_row_errors(rows: &[records::ObsRow]) {
+    for r in rows {
+        if let Err(e) = &r.obs {
+            eprintln!("error: {e}");
+        }
+    }
+}
+
+fn forward_mogi(input: &Path, output: &Path, stations: Option<&Path>) -> Result<()> {
+    let (names, st) = match stations {
+        Some(p) => read_stations(p)?,
+        None => (
+            synth::AKUTAN.iter().map(|s| s.0.to_string()).collect(),
+            synth::AKUTAN.iter().map(|s| magic_core::mogi::Station { x_km: s.1, y_km: s.2, z_km: s.3 }).collect(),
+        ),
+    };
+    let t = data::table::Table::read(input, b',')?;
+    let cols: Vec<usize> = ["xcen_km", "ycen_km", "d_km", "dV_1e6m3"].iter().map(|c| t.col(c)).collect::<Result<_>>()?;
+    let id = t.col("sample_id").ok();
+    let mut text = String::new();
+    if id.is_some() {
+        text.push_str("sample_id,");
+    }
+    text.push_str(&magic_train::data::gnss::channel_names(&names).join(","));
+    text.push('\n');
+    let mut u = vec![0f64; 3 * st.len()];
+    for r in 0..t.rows.len() {
+        let p: Vec<f64> = cols.iter().map(|&c| t.num(r, c, false)).collect::<Result<_>>()?;
+        let p = [p[0], p[1], p[2], p[3]];
+        magic_core::mogi::field(&st, &p, &mut u).map_err(|e| anyhow::anyhow!("{}:{}: {e}", t.path, t.line(r)))?;
+        if let Some(c) = id {
+            text.push_str(t.text(r, c));
+            text.push(',');
+        }
+        let f: Vec<String> = u.iter().map(|v| format!("{v:e}")).collect();
+        text.push_str(&f.join(","));
+        text.push('\n');
+    }
+    std::fs::write(output, text).with_context(|| format!("{}: cannot write", output.display()))?;
+    eprintln!("{} rows -> {}", t.rows.len(), output.display());
+    Ok(())
+}
+
+fn read_stations(p: &Path) -> Result<(Vec<String>, Vec<magic_core::mogi::Station>)> {
+    let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", p.display()))?;
+    let obj = v.as_object().with_context(|| format!("{}: expected an object of stations", p.display()))?;
+    let mut names = vec![];
+    let mut st = vec![];
+    for (k, s) in obj {
+        let g = |f: &str| s.get(f).and_then(|x| x.as_f64()).with_context(|| format!("{}: station {k}: `{f}` missing", p.display()));
+        names.push(k.clone());
+        st.push(magic_core::mogi::Station { x_km: g("xE")?, y_km: g("yN")?, z_km: g("zV")? });
+    }
+    Ok((names, st))
 }
