@@ -446,3 +446,351 @@ fn physical_sail_matches_prosail() {
         assert!(err[k] <= 1e-6, "{}: {:e}", factors[k], err[k]);
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Exact Jacobian (Dual<7>) against central differences
+
+/// Relative agreement of an exact derivative with a central difference. Derivatives are scaled by
+/// the variable's range (so each is "band change over the whole range"); the comparison is
+/// relative to the larger of the two, floored at 1e-4 (a derivative that moves a band by less than
+/// 1e-4 reflectance over the whole range is compared in absolute terms).
+fn jacobian_error(model: &Inform<'_>, z: &[f64; N_LEARNED], geometry: Geometry) -> f64 {
+    let fixed = Fixed::default();
+    let (y, jac) = model.jacobian(z, &fixed, geometry).unwrap();
+    let y0 = model.forward_learned(z, &fixed, geometry).unwrap();
+    for b in 0..N_BANDS {
+        assert!(
+            (y[b] - y0[b]).abs() <= 1e-14,
+            "dual value differs from f64 value"
+        );
+    }
+    let mut worst = 0.0f64;
+    for i in 0..N_LEARNED {
+        let range = LEARNED_BOUNDS[i][1] - LEARNED_BOUNDS[i][0];
+        let h = 1e-5 * range;
+        let mut zp = *z;
+        let mut zm = *z;
+        zp[i] += h;
+        zm[i] -= h;
+        let yp = model.forward_learned(&zp, &fixed, geometry).unwrap();
+        let ym = model.forward_learned(&zm, &fixed, geometry).unwrap();
+        for b in 0..N_BANDS {
+            assert!(
+                jac[b][i].is_finite(),
+                "non-finite derivative d{}/dz{i} at {z:?}",
+                magic_core::rtm::S2_BANDS[b]
+            );
+            let fd = (yp[b] - ym[b]) / (2.0 * h) * range;
+            let ex = jac[b][i] * range;
+            let err = (ex - fd).abs() / fd.abs().max(ex.abs()).max(1e-4);
+            worst = worst.max(err);
+        }
+    }
+    worst
+}
+
+fn box_point(u: &[f64; N_LEARNED]) -> [f64; N_LEARNED] {
+    let mut z = [0.0; N_LEARNED];
+    for i in 0..N_LEARNED {
+        z[i] = LEARNED_BOUNDS[i][0] + u[i] * (LEARNED_BOUNDS[i][1] - LEARNED_BOUNDS[i][0]);
+    }
+    z
+}
+
+#[test]
+fn jacobian_matches_central_differences_at_corners_and_centre() {
+    let Some(d) = data() else { return };
+    let model = Inform::new(d.tables.tables()).unwrap();
+    let mut worst = [0.0f64; 2];
+    let mut points = vec![[0.5; N_LEARNED]];
+    // All 128 corners of the box.
+    for mask in 0..(1u32 << N_LEARNED) {
+        let mut u = [0.0; N_LEARNED];
+        for (i, ui) in u.iter_mut().enumerate() {
+            *ui = ((mask >> i) & 1) as f64;
+        }
+        points.push(u);
+    }
+    for u in &points {
+        let z = box_point(u);
+        for (g, geometry) in [Geometry::Reference, Geometry::Physical]
+            .into_iter()
+            .enumerate()
+        {
+            worst[g] = worst[g].max(jacobian_error(&model, &z, geometry));
+        }
+    }
+    eprintln!(
+        "Jacobian vs central differences, centre + 128 corners: max relative error reference {:.3e}, physical {:.3e}",
+        worst[0], worst[1]
+    );
+    assert!(worst[0] <= 1e-5 && worst[1] <= 1e-5, "{worst:?}");
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 48, ..Default::default() })]
+
+    #[test]
+    fn jacobian_matches_central_differences_in_the_box(
+        u in proptest::array::uniform7(0.0f64..=1.0),
+        physical in proptest::bool::ANY,
+    ) {
+        let Some(d) = data() else { return Ok(()) };
+        let model = Inform::new(d.tables.tables()).unwrap();
+        let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
+        let err = jacobian_error(&model, &box_point(&u), geometry);
+        proptest::prop_assert!(err <= 1e-5, "relative error {err:e} at {u:?}");
+    }
+
+    #[test]
+    fn jacobian_is_finite_on_the_box_faces(
+        u in proptest::array::uniform7(0.0f64..=1.0),
+        face in 0usize..N_LEARNED,
+        high in proptest::bool::ANY,
+        physical in proptest::bool::ANY,
+    ) {
+        let Some(d) = data() else { return Ok(()) };
+        let model = Inform::new(d.tables.tables()).unwrap();
+        let mut u = u;
+        u[face] = if high { 1.0 } else { 0.0 };
+        let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
+        let (y, jac) = model.jacobian(&box_point(&u), &Fixed::default(), geometry).unwrap();
+        for b in 0..N_BANDS {
+            proptest::prop_assert!(y[b].is_finite());
+            for i in 0..N_LEARNED {
+                proptest::prop_assert!(jac[b][i].is_finite(), "d{}/d{} at {u:?}", b, i);
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Physical invariants
+
+/// Inputs from unit-cube coordinates over the learned box and a varied geometry / structure.
+fn varied_inputs(u: &[f64; N_LEARNED], v: &[f64; 6]) -> [f64; N_INPUTS] {
+    let fixed = Fixed {
+        lidf: (v[0] * 5.999).floor(),
+        psoil: v[1],
+        hspot: 0.001 + 0.5 * v[2],
+        tts: 70.0 * v[3],
+        tto: 30.0 * v[4],
+        psi: 180.0 * v[5],
+        sd: 200.0 + 1300.0 * v[2],
+        ..Fixed::default()
+    };
+    inputs_from_learned(&box_point(u), &fixed)
+}
+
+fn closed_and_open(model: &Inform<'_>, x: &[f64; N_INPUTS], geometry: Geometry) -> (f64, f64, f64) {
+    // Largest |forest − closed canopy| and |forest − understory| over the band wavelengths.
+    let scene = model.scene(x, geometry).unwrap();
+    let (mut to_closed, mut to_under, mut max_r) = (0.0f64, 0.0f64, 0.0f64);
+    for &(a, b) in model.sensor().spans() {
+        for i in a..=b {
+            let t = scene.wavelength(&model.row(i).unwrap());
+            let tst = t.t_s * t.t_o;
+            let closed = t.r_crown_inf * (1.0 - tst) + t.r_understory * tst;
+            to_closed = to_closed.max((t.r_forest - closed).abs());
+            to_under = to_under.max((t.r_forest - t.r_understory).abs());
+            max_r = max_r.max(t.r_forest);
+        }
+    }
+    (to_closed, to_under, max_r)
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 64, ..Default::default() })]
+
+    #[test]
+    fn reflectance_is_in_unit_interval(
+        u in proptest::array::uniform7(0.0f64..=1.0),
+        v in proptest::array::uniform6(0.0f64..1.0),
+        physical in proptest::bool::ANY,
+    ) {
+        let Some(d) = data() else { return Ok(()) };
+        let model = Inform::new(d.tables.tables()).unwrap();
+        let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
+        let x = varied_inputs(&u, &v);
+        let y = model.forward(&x, geometry).unwrap();
+        for b in 0..N_BANDS {
+            proptest::prop_assert!(y[b] > 0.0 && y[b] < 1.0, "band {b} = {} for {x:?}", y[b]);
+        }
+        let y32 = model.forward(&x.map(|v| v as f32), geometry).unwrap();
+        for b in 0..N_BANDS {
+            proptest::prop_assert!((y32[b] as f64 - y[b]).abs() < 2e-5);
+        }
+    }
+
+    #[test]
+    fn cover_limits(
+        u in proptest::array::uniform7(0.0f64..=1.0),
+        v in proptest::array::uniform6(0.0f64..1.0),
+        physical in proptest::bool::ANY,
+    ) {
+        let Some(d) = data() else { return Ok(()) };
+        let model = Inform::new(d.tables.tables()).unwrap();
+        let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
+        let mut x = varied_inputs(&u, &v);
+        let mut gap = Vec::new();
+        // Crown cover grows with fc = k·sd: the stand approaches the closed crown layer
+        // r_inf·(1 − t_s·t_o) + r_u·t_s·t_o (every crown over shaded ground).
+        for fc in [0.1, 1.0, 5.0, 40.0] {
+            let (cd, h) = magic_core::rtm::inform::crown_from_cover(fc, x[19]);
+            x[18] = cd;
+            x[20] = h;
+            gap.push(closed_and_open(&model, &x, geometry).0);
+        }
+        proptest::prop_assert!(gap[3] < 1e-9, "fc 40: {gap:?}");
+        proptest::prop_assert!(gap[2] < gap[0], "{gap:?}");
+        // Sparse stands approach the understory.
+        let (cd, h) = magic_core::rtm::inform::crown_from_cover(1e-7, x[19]);
+        x[18] = cd;
+        x[20] = h;
+        let (_, to_under, _) = closed_and_open(&model, &x, geometry);
+        proptest::prop_assert!(to_under < 1e-6, "{to_under}");
+    }
+
+    #[test]
+    fn sail_is_reciprocal_in_sun_and_view(
+        tts in 0.0f64..75.0,
+        tto in 0.0f64..75.0,
+        psi in 0.0f64..180.0,
+        lai in 0.01f64..8.0,
+        hot in 0.0f64..0.5,
+        ala in 5.0f64..85.0,
+        rho in 0.01f64..0.6,
+        tau in 0.0f64..0.4,
+        soil in 0.0f64..0.5,
+    ) {
+        let lidf = Lidf::campbell(ala, CampbellBins::Uniform18).unwrap();
+        let run = |a: f64, b: f64| {
+            let e = extinction(&SunView::from_degrees(a, b, psi), &lidf);
+            let l = layer(&e, lai, hot, HotspotRule::Physical);
+            sail(&e, &l, &medium(e.bf, magic_core::rtm::prospect::LeafOptics { refl: rho, trans: tau }), soil)
+        };
+        let (p, q) = (run(tts, tto), run(tto, tts));
+        proptest::prop_assert!((p.rsot - q.rsot).abs() < 1e-10, "rsot {} {}", p.rsot, q.rsot);
+        proptest::prop_assert!((p.rdot - q.rsdt).abs() < 1e-10, "rdot/rsdt {} {}", p.rdot, q.rsdt);
+        proptest::prop_assert!((p.rddt - q.rddt).abs() < 1e-12);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Inputs that must be refused
+
+#[test]
+fn bad_inputs_are_errors() {
+    let Some(d) = data() else { return };
+    let model = Inform::new(d.tables.tables()).unwrap();
+    let good = inputs_from_learned(&box_point(&[0.5; N_LEARNED]), &Fixed::default());
+    assert!(model.forward(&good, Geometry::Reference).is_ok());
+    let mut x = good;
+    x[1] = f64::NAN;
+    assert_eq!(
+        model.forward(&x, Geometry::Reference),
+        Err(Error::NonFinite {
+            what: "inform input",
+            index: 1
+        })
+    );
+    for (i, v) in [
+        (10, 3.0),
+        (11, 6.0),
+        (11, -1.0),
+        (0, 0.0),
+        (9, 0.0),
+        (17, -1.0),
+        (14, 90.0),
+        (13, 1.5),
+    ] {
+        let mut x = good;
+        x[i] = v;
+        assert!(
+            matches!(
+                model.forward(&x, Geometry::Physical),
+                Err(Error::OutOfRange { .. })
+            ),
+            "input {i} = {v}"
+        );
+    }
+    let mut x = good;
+    x[10] = 2.0;
+    x[11] = 120.0; // mean leaf angle out of range
+    assert!(model.forward(&x, Geometry::Reference).is_err());
+    x[11] = 45.0;
+    assert!(model.forward(&x, Geometry::Reference).is_ok());
+    // Wrong table sizes.
+    let t = d.tables.tables();
+    let short = Tables {
+        soil_dry: &t.soil_dry[1..],
+        ..t
+    };
+    assert!(matches!(
+        Inform::new(short),
+        Err(Error::SizeMismatch { .. })
+    ));
+    let short = Tables {
+        resampling: &t.resampling[13..],
+        ..t
+    };
+    assert!(matches!(
+        Inform::new(short),
+        Err(Error::SizeMismatch { .. })
+    ));
+    let short = Tables {
+        lidf_beta: &t.lidf_beta[1..],
+        ..t
+    };
+    assert!(matches!(
+        Inform::new(short),
+        Err(Error::SizeMismatch { .. })
+    ));
+    assert!(model
+        .forward_learned(
+            &[f64::INFINITY; N_LEARNED],
+            &Fixed::default(),
+            Geometry::Reference
+        )
+        .is_err());
+}
+
+/// Cost per spectrum (run with `--ignored --test-threads=1` in release for meaningful numbers).
+#[test]
+#[ignore]
+fn timing() {
+    let Some(d) = data() else { return };
+    let model = Inform::new(d.tables.tables()).unwrap();
+    let fixed = Fixed::default();
+    let z = box_point(&[0.4; N_LEARNED]);
+    let x = inputs_from_learned(&z, &fixed);
+    let x32 = x.map(|v| v as f32);
+    let n = 2000;
+    let t0 = std::time::Instant::now();
+    let mut acc = 0.0;
+    for k in 0..n {
+        let mut xx = x;
+        xx[1] += k as f64 * 1e-3;
+        acc += model.forward(&xx, Geometry::Reference).unwrap()[3];
+    }
+    let f64_us = t0.elapsed().as_secs_f64() / n as f64 * 1e6;
+    let t0 = std::time::Instant::now();
+    for k in 0..n {
+        let mut xx = x32;
+        xx[1] += k as f32 * 1e-3;
+        acc += model.forward(&xx, Geometry::Reference).unwrap()[3] as f64;
+    }
+    let f32_us = t0.elapsed().as_secs_f64() / n as f64 * 1e6;
+    let m = 300;
+    let t0 = std::time::Instant::now();
+    for k in 0..m {
+        let mut zz = z;
+        zz[1] += k as f64 * 1e-3;
+        acc += model.jacobian(&zz, &fixed, Geometry::Reference).unwrap().1[3][1];
+    }
+    let jac_us = t0.elapsed().as_secs_f64() / m as f64 * 1e6;
+    eprintln!(
+        "timing ({} wavelengths): forward f64 {f64_us:.1} us, f32 {f32_us:.1} us, forward + Jacobian (Dual<7>) {jac_us:.1} us [{acc:.3}]",
+        model.sensor().n_active()
+    );
+}

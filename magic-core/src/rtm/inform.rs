@@ -51,8 +51,8 @@
 
 use super::prospect::{leaf_optics, CoefRow, Leaf, LeafOptics};
 use super::sail::{
-    extinction, layer, medium, mixed_reflectance, sail, skyl, sqrt0, tan_distance, Extinction,
-    HotspotRule, Layer, Lidf, SailOutput, SunView,
+    directional, extinction, layer, medium, mixed_reflectance, sail_parts, skyl, slab, sqrt0,
+    tan_distance, Extinction, HotspotRule, Layer, Lidf, SailOutput, SunView,
 };
 use crate::real::Real;
 use core::f64::consts::PI;
@@ -282,24 +282,40 @@ impl<R: Real> Scene<R> {
     #[inline]
     pub fn wavelength(&self, row: &SpectralRow) -> WavelengthTerms<R> {
         let leaf = leaf_optics(&row.coef, &self.leaf);
-        // bf depends on the LIDF only, so one medium serves every 4SAIL call.
+        // bf depends on the LIDF only, so one medium serves every 4SAIL call; the calls share
+        // the sun/view terms (one or two geometries) and the diffuse terms of each LAI.
         let md = medium(self.ext.bf, leaf);
+        let dir = directional(&self.ext, &md);
         let soil = self.psoil * R::c(row.soil_dry) + (R::one() - self.psoil) * R::c(row.soil_wet);
-        let u = sail(&self.ext, &self.understory, &md, soil);
+        let u = sail_parts(
+            &self.understory,
+            &md,
+            &dir,
+            &slab(&md, self.understory.lai),
+            soil,
+        );
         let r_u = mixed_reflectance(u.rsot, u.rdot, self.skyl_s, row.es, row.ed);
-        let inf = sail(&self.ext, &self.crown_inf, &md, r_u);
+        let inf = sail_parts(
+            &self.crown_inf,
+            &md,
+            &dir,
+            &slab(&md, self.crown_inf.lai),
+            r_u,
+        );
         let r_inf = mixed_reflectance(inf.rsot, inf.rdot, self.skyl_s, row.es, row.ed);
+        let crown_slab = slab(&md, self.crown_s.lai);
         let (t_s, t_o) = match self.geometry {
             Geometry::Reference => {
-                let s = sail(&self.ext, &self.crown_s, &md, r_u);
-                let o = sail(&self.ext_o, &self.crown_o, &md, r_u);
+                let s = sail_parts(&self.crown_s, &md, &dir, &crown_slab, r_u);
+                let dir_o = directional(&self.ext_o, &md);
+                let o = sail_parts(&self.crown_o, &md, &dir_o, &crown_slab, r_u);
                 (
                     mixed_reflectance(s.rsot, s.rdot, self.skyl_s, 1.0, 1.0),
                     mixed_reflectance(o.rsot, o.rdot, self.skyl_o, 1.0, 1.0),
                 )
             }
             Geometry::Physical => {
-                let c = sail(&self.ext, &self.crown_s, &md, r_u);
+                let c = sail_parts(&self.crown_s, &md, &dir, &crown_slab, r_u);
                 crown_transmittances(&c, r_u, self.skyl_s)
             }
         };

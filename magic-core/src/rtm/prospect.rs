@@ -166,7 +166,9 @@ pub fn leaf_optics<R: Real>(c: &CoefRow, leaf: &Leaf<R>) -> LeafOptics<R> {
         k = R::c(f64::EPSILON);
     }
     let one = R::one();
-    let tau = (one - k) * (-k).exp() + k * k * k.e1();
+    // τ and dτ/dk in f64, lifted to R (exact first derivative for duals, the value for floats).
+    let (tau_v, dtau_v) = plate_transmissivity(k.value());
+    let tau = R::c(tau_v) + (k - R::c(k.value())) * R::c(dtau_v);
     let tau2 = tau * tau;
 
     // Interfaces (precomputed transmissivities).
@@ -177,44 +179,195 @@ pub fn leaf_optics<R: Real>(c: &CoefRow, leaf: &Leaf<R>) -> LeafOptics<R> {
     let r21 = one - t21;
     let r21_2 = r21 * r21;
     let x = R::c(c.t12 / c.tav90n);
+    let inv_x = R::c(c.tav90n / c.t12);
     let y = x * (tav90 - one) + one - t12;
 
     // Elementary layer (N = 1).
-    let den = one - r21_2 * tau2;
-    let ra = r12 + t12 * t21 * r21 * tau2 / den;
-    let ta = t12 * t21 * tau / den;
-    let r90 = (ra - y) / x;
-    let t90 = ta / x;
+    let inv_den = one / (one - r21_2 * tau2);
+    let ra = r12 + t12 * t21 * r21 * tau2 * inv_den;
+    let ta = t12 * t21 * tau * inv_den;
+    let r90 = (ra - y) * inv_x;
+    let t90 = ta * inv_x;
 
     // Stokes' equations for the remaining N − 1 layers, in a cancellation-free form (the textbook
     // form loses up to 4 digits in β − r90 when the plate is nearly opaque, too many for f32):
     //   A = 1 + r² − t²,  B = 1 − r² + t²,  δ = sqrt(A² − 4r²) = sqrt((1 − (r+t)²)(1 − (r−t)²)),
     //   va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = (1 − r² − t² + δ)/(2r),
-    //   va·(β − r) = 2t²/(B + δ).
+    //   va·(β − r) = 2t²/(B + δ),  vb² = β·(va − r) / (va·(β − r)).
     let t90_2 = t90 * t90;
     let r90_2 = r90 * r90;
     let delta = ((one - (r90 + t90) * (r90 + t90)) * (one - (r90 - t90) * (r90 - t90))).sqrt();
     let a_plus = one + r90_2 - t90_2 + delta;
+    let b_plus = one - r90_2 + t90_2 + delta;
     let two_r90 = R::c(2.0) * r90;
-    let va = a_plus / two_r90;
+    let inv_two_r90 = one / two_r90;
+    let va = a_plus * inv_two_r90;
     let beta = two_r90 / a_plus;
-    let va_minus_r = (one - r90_2 - t90_2 + delta) / two_r90;
-    let vden = R::c(2.0) * t90_2 / (one - r90_2 + t90_2 + delta);
-    let vb = if vden.value() <= VB_FLOOR {
+    let va_minus_r = (one - r90_2 - t90_2 + delta) * inv_two_r90;
+    let two_t2 = R::c(2.0) * t90_2;
+    // Reference guard: va·(β − r) is floored at 1e-14.
+    let vb = if two_t2.value() <= VB_FLOOR * b_plus.value() {
         (beta * va_minus_r / R::c(VB_FLOOR)).sqrt()
     } else {
-        (beta * va_minus_r / vden).sqrt()
+        (beta * va_minus_r * b_plus / two_t2).sqrt()
     };
-    let vbnn = vb.powf(leaf.n - one);
+    let vbnn = ((leaf.n - one) * vb.ln()).exp();
     let vbnn_inv = one / vbnn;
-    let va_inv = one / va;
+    let va_inv = beta;
     let s1 = ta * t90 * (vbnn - vbnn_inv);
     let s2 = ta * (va - va_inv);
-    let s3 = va * vbnn - va_inv * vbnn_inv - r90 * (vbnn - vbnn_inv);
+    let inv_s3 = one / (va * vbnn - va_inv * vbnn_inv - r90 * (vbnn - vbnn_inv));
     LeafOptics {
-        refl: ra + s1 / s3,
-        trans: s2 / s3,
+        refl: ra + s1 * inv_s3,
+        trans: s2 * inv_s3,
     }
+}
+
+/// Largest relative error of [`e1_fast`] against 40-digit test vectors on (1e-12, 80).
+pub const E1_FAST_MAX_REL_ERROR: f64 = 2e-15;
+
+/// Most terms of the power series (x ≤ 1 needs 18 for 1e-17).
+const E1_SERIES_TERMS: usize = 24;
+
+/// 1/k for k = 0..=E1_SERIES_TERMS (index 0 unused).
+const INV: [f64; E1_SERIES_TERMS + 1] = {
+    let mut t = [0.0; E1_SERIES_TERMS + 1];
+    let mut k = 1;
+    while k <= E1_SERIES_TERMS {
+        t[k] = 1.0 / k as f64;
+        k += 1;
+    }
+    t
+};
+
+/// Largest argument for which [`e1_fast`] sums the power series.
+const E1_SERIES_MAX: f64 = 1.0;
+/// Taylor patches of `h(x) = e^x·E1(x)`: width 0.25 on (1, 4], width 0.5 on (4, 10].
+const E1_PATCHES: usize = 24;
+/// Taylor terms per patch (|x − x0| / x0 ≤ 1/9 leaves < 1e-17).
+const E1_TAYLOR_TERMS: usize = 18;
+/// Above this the continued fraction converges in fewer than 20 steps.
+const E1_TAYLOR_MAX: f64 = 10.0;
+
+/// `e^x·E1(x)` by backward evaluation of the continued fraction
+/// `1/(x + 1 − 1²/(x + 3 − 2²/(x + 5 − …)))` to `depth` levels (const, for the Taylor patches).
+const fn h_cf(x: f64, depth: usize) -> f64 {
+    let mut t = 0.0;
+    let mut j = depth;
+    while j >= 2 {
+        let jm1 = (j - 1) as f64;
+        t = -(jm1 * jm1) / (x + (2 * j - 1) as f64 + t);
+        j -= 1;
+    }
+    1.0 / (x + 1.0 + t)
+}
+
+/// Patch centres.
+const fn patch_centre(i: usize) -> f64 {
+    if i < 12 {
+        1.125 + 0.25 * i as f64
+    } else {
+        4.25 + 0.5 * (i - 12) as f64
+    }
+}
+
+/// Taylor coefficients of `h(x) = e^x·E1(x)` around each patch centre x0. `h` obeys
+/// `h' = h − 1/x`, so with `h = Σ aₙ (x − x0)ⁿ`:
+/// `aₙ₊₁ = (aₙ − (−1)ⁿ / x0ⁿ⁺¹) / (n + 1)`, started from `a₀ = h(x0)` (continued fraction, 1500
+/// levels). Computed at compile time; errors in aₙ are damped by the 1/(n+1) factors.
+const E1_TAYLOR: [[f64; E1_TAYLOR_TERMS]; E1_PATCHES] = {
+    let mut t = [[0.0; E1_TAYLOR_TERMS]; E1_PATCHES];
+    let mut i = 0;
+    while i < E1_PATCHES {
+        let x0 = patch_centre(i);
+        t[i][0] = h_cf(x0, 1500);
+        let mut n = 0;
+        let mut inv_pow = 1.0 / x0; // 1 / x0^(n+1)
+        let mut sign = 1.0; // (−1)^n
+        while n + 1 < E1_TAYLOR_TERMS {
+            t[i][n + 1] = (t[i][n] - sign * inv_pow) / (n + 1) as f64;
+            inv_pow /= x0;
+            sign = -sign;
+            n += 1;
+        }
+        i += 1;
+    }
+    t
+};
+
+/// The exponential integral E1(x), x > 0, in f64, tuned for PROSPECT (x from 1e-16 to ~100):
+/// the power series `−γ − ln x − Σ (−x)^k / (k·k!)` for x ≤ 1; Taylor patches of `e^x·E1(x)`
+/// (coefficients from the differential equation `h' = h − 1/x`, computed at compile time) for
+/// 1 < x ≤ 10; the continued fraction `e^(−x) / (x + 1 − 1/(x + 3 − 4/(x + 5 − …)))` above. It
+/// is within [`E1_FAST_MAX_REL_ERROR`] of E1 and several times faster than
+/// [`crate::real::e1_f64`] for 1 < x < 4, where that function's continued fraction converges slowly.
+pub fn e1_fast(x: f64) -> f64 {
+    e1_with_exp(x, libm::exp(-x))
+}
+
+/// [`e1_fast`] given `ex = e^(−x)` (used for x > 1 only).
+#[inline]
+fn e1_with_exp(x: f64, ex: f64) -> f64 {
+    if x.is_nan() || x <= 0.0 {
+        return if x == 0.0 { f64::INFINITY } else { f64::NAN };
+    }
+    if x <= E1_SERIES_MAX {
+        // Σ_{k≥1} (−1)^(k+1) x^k / (k·k!), to 1e-17 of the sum (reciprocals from a table: a
+        // division in this dependency chain would cost more than everything else).
+        let mut term = x; // (−1)^(k+1) x^k / k!
+        let mut sum = 0.0;
+        let mut k = 1;
+        while k < E1_SERIES_TERMS {
+            let add = term * INV[k];
+            sum += add;
+            if libm::fabs(add) < 1e-17 * libm::fabs(sum) {
+                break;
+            }
+            term *= -x * INV[k + 1];
+            k += 1;
+        }
+        -0.577_215_664_901_532_9 - libm::log(x) + sum
+    } else if x <= E1_TAYLOR_MAX {
+        let i = if x <= 4.0 {
+            libm::floor((x - 1.0) * 4.0) as usize
+        } else {
+            12 + libm::floor((x - 4.0) * 2.0) as usize
+        }
+        .min(E1_PATCHES - 1);
+        let c = &E1_TAYLOR[i];
+        let d = x - patch_centre(i);
+        let mut h = 0.0;
+        for &a in c.iter().rev() {
+            h = h * d + a;
+        }
+        ex * h
+    } else {
+        // Forward recurrence of the continued fraction (one division); depth for 1e-16.
+        let depth = 8 + libm::ceil(110.0 / x) as usize;
+        let (mut a_prev, mut a) = (1.0f64, 0.0f64); // A_{-1}, A_0
+        let (mut b_prev, mut b) = (0.0f64, 1.0f64); // B_{-1}, B_0
+        for j in 1..=depth {
+            let jm1 = (j - 1) as f64;
+            let aj = if j == 1 { 1.0 } else { -jm1 * jm1 };
+            let bj = x + (2 * j - 1) as f64;
+            let a_next = bj * a + aj * a_prev;
+            let b_next = bj * b + aj * b_prev;
+            a_prev = a;
+            a = a_next;
+            b_prev = b;
+            b = b_next;
+        }
+        ex * a / b
+    }
+}
+
+/// The transmissivity of a plate's interior `τ(k) = (1 − k)·e^(−k) + k²·E1(k)` and its derivative
+/// `dτ/dk = 2·(k·E1(k) − e^(−k))`.
+#[inline]
+pub fn plate_transmissivity(k: f64) -> (f64, f64) {
+    let ek = libm::exp(-k);
+    let e1 = e1_with_exp(k, ek);
+    ((1.0 - k) * ek + k * k * e1, 2.0 * (k * e1 - ek))
 }
 
 /// Allen's average transmissivity of a dielectric plane surface for light incident within a
@@ -287,6 +440,68 @@ mod tests {
             cbrown: 0.25,
             cw: 0.01,
             cm: 0.01,
+        }
+    }
+
+    /// E1 at 40 digits (mpmath), rounded to 20.
+    #[allow(clippy::excessive_precision)]
+    const E1_VECTORS: [(f64, f64); 22] = [
+        (1e-12, 2.7053805451028015368e+1),
+        (1e-06, 1.3238295893062491289e+1),
+        (0.01, 4.0379295765381138112),
+        (0.1, 1.8229239584193906159),
+        (0.5, 5.5977359477616081175e-1),
+        (0.999, 2.1975218202294454114e-1),
+        (1.0, 2.1938393439552027368e-1),
+        (1.0347383610327399, 2.0703584133945020168e-1),
+        (1.3, 1.3545095784912912986e-1),
+        (1.75, 6.9488684604638792638e-2),
+        (2.0, 4.8900510708061119567e-2),
+        (2.6, 2.1850221804082191073e-2),
+        (3.3, 8.9390425420321405577e-3),
+        (4.0, 3.7793524098489064789e-3),
+        (4.6, 1.8410058172415038476e-3),
+        (6.1, 3.2108702794965483304e-4),
+        (8.0, 3.7665622843924901773e-5),
+        (9.99, 4.2026194847832813939e-6),
+        (10.01, 4.111817778982802173e-6),
+        (15.0, 1.9186278921478669771e-8),
+        (30.0, 3.0215520106888125448e-15),
+        (80.0, 2.2285432586884729112e-37),
+    ];
+
+    #[test]
+    fn e1_fast_matches_test_vectors() {
+        for (x, want) in E1_VECTORS {
+            let rel = ((e1_fast(x) - want) / want).abs();
+            assert!(rel < E1_FAST_MAX_REL_ERROR, "x {x}: rel {rel:e}");
+        }
+        assert!(e1_fast(0.0).is_infinite() && e1_fast(-1.0).is_nan() && e1_fast(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn e1_fast_matches_e1_f64() {
+        // Dense grid against the crate's general E1 (itself within E1_MAX_REL_ERROR).
+        let mut worst = 0.0f64;
+        let mut x = 1e-12;
+        while x < 200.0 {
+            let (a, b) = (e1_fast(x), crate::real::e1_f64(x));
+            worst = worst.max(((a - b) / b).abs());
+            x *= 1.0 + 1e-3;
+        }
+        assert!(
+            worst < E1_FAST_MAX_REL_ERROR + crate::real::E1_MAX_REL_ERROR * 1.1,
+            "{worst:e}"
+        );
+    }
+
+    #[test]
+    fn plate_transmissivity_derivative() {
+        for &k in &[1e-6, 0.1, 1.0, 2.0, 2.5, 7.0, 30.0] {
+            let (_, d) = plate_transmissivity(k);
+            let h = 1e-3 * k;
+            let fd = (plate_transmissivity(k + h).0 - plate_transmissivity(k - h).0) / (2.0 * h);
+            assert!((d - fd).abs() < 1e-6 * (1.0 + fd.abs()), "k {k}: {d} {fd}");
         }
     }
 

@@ -12,8 +12,14 @@
 //!   Simpson integration with Bréon's 2/(ks+ko) correction).
 //! * [`medium`] — per wavelength and LIDF: the diffuse scattering coefficients, the attenuation
 //!   eigenvalue `m` and the infinite-layer reflectance `rinf` (independent of sun and view).
-//! * [`sail`] — per wavelength and layer: the four reflectance factors `rsot`, `rdot`, `rsdt`,
-//!   `rddt` of canopy + background, and the layer transmittances.
+//! * [`directional`] — per wavelength and geometry: the medium's sources along sun and view;
+//! * [`slab`] — per wavelength and LAI: the diffuse reflectance and transmittance of the layer;
+//! * [`sail_parts`] (or [`sail`], which builds the parts) — per wavelength and layer: the four
+//!   reflectance factors `rsot`, `rdot`, `rsdt`, `rddt` of canopy + background, and the layer
+//!   transmittances.
+//!
+//! INFORM runs four 4SAIL calls per wavelength that share the medium, two geometries and three
+//! LAIs; sharing these parts divides the per-wavelength work.
 //!
 //! Details that follow the reference implementation because they change outputs: the `J1`
 //! function switches to its series form when `|(k − l)·LAI| ≤ 1e-3`, and in
@@ -513,6 +519,8 @@ pub struct Medium<R> {
     pub m: R,
     /// Reflectance of an infinitely thick layer.
     pub rinf: R,
+    /// `1 / (1 − rinf²)`.
+    pub inv_1m_rinf2: R,
 }
 
 /// The medium terms from leaf optics and the LIDF's `bf`.
@@ -529,6 +537,7 @@ pub fn medium<R: Real>(bf: R, leaf: LeafOptics<R>) -> Medium<R> {
     let att = one - sigf;
     let m = sqrt0((att + sigb) * (att - sigb));
     let rinf = (att - m) / sigb;
+    let inv_1m_rinf2 = one / (one - rinf * rinf);
     Medium {
         rho,
         tau,
@@ -536,6 +545,107 @@ pub fn medium<R: Real>(bf: R, leaf: LeafOptics<R>) -> Medium<R> {
         att,
         m,
         rinf,
+        inv_1m_rinf2,
+    }
+}
+
+/// Per wavelength terms of a medium seen in one sun/view geometry, shared by every layer with
+/// that geometry (any LAI).
+#[derive(Clone, Copy, Debug)]
+pub struct Directional<R> {
+    /// `sf + sb·rinf` (sun-direction source into the downward diffuse stream).
+    pub s_down: R,
+    /// `sf·rinf + sb`.
+    pub s_up: R,
+    /// `vf + vb·rinf` (view-direction source).
+    pub v_down: R,
+    /// `vf·rinf + vb`.
+    pub v_up: R,
+    /// Bidirectional scattering `sob·rho + sof·tau`.
+    pub w: R,
+    /// `ks − m`.
+    pub ks_m: R,
+    /// `ko − m`.
+    pub ko_m: R,
+    /// `1 / (ks − m)` (0 when `ks = m` exactly; only used away from that point).
+    pub inv_ks_m: R,
+    /// `1 / (ko − m)` (as `inv_ks_m`).
+    pub inv_ko_m: R,
+    /// `1 / (ks + m)`.
+    pub inv_ks_p: R,
+    /// `1 / (ko + m)`.
+    pub inv_ko_p: R,
+}
+
+#[inline]
+fn inv_or_zero<R: Real>(x: R) -> R {
+    if x.value() != 0.0 {
+        R::one() / x
+    } else {
+        R::zero()
+    }
+}
+
+/// The directional terms of medium `md` in geometry `e`.
+#[inline]
+pub fn directional<R: Real>(e: &Extinction<R>, md: &Medium<R>) -> Directional<R> {
+    let half = R::c(0.5);
+    let (rho, tau, m, rinf) = (md.rho, md.tau, md.m, md.rinf);
+    let sdb = half * (e.ks + e.bf);
+    let sdf = half * (e.ks - e.bf);
+    let dob = half * (e.ko + e.bf);
+    let dof = half * (e.ko - e.bf);
+    let sb = sdb * rho + sdf * tau;
+    let sf = sdf * rho + sdb * tau;
+    let vb = dob * rho + dof * tau;
+    let vf = dof * rho + dob * tau;
+    let ks_m = e.ks - m;
+    let ko_m = e.ko - m;
+    Directional {
+        s_down: sf + sb * rinf,
+        s_up: sf * rinf + sb,
+        v_down: vf + vb * rinf,
+        v_up: vf * rinf + vb,
+        w: e.sob * rho + e.sof * tau,
+        ks_m,
+        ko_m,
+        inv_ks_m: inv_or_zero(ks_m),
+        inv_ko_m: inv_or_zero(ko_m),
+        inv_ks_p: R::one() / (e.ks + m),
+        inv_ko_p: R::one() / (e.ko + m),
+    }
+}
+
+/// Per wavelength diffuse terms of a layer of the medium with a given LAI, shared by every
+/// geometry.
+#[derive(Clone, Copy, Debug)]
+pub struct Slab<R> {
+    /// `exp(−m·LAI)`.
+    pub e1: R,
+    /// `rinf·e1`.
+    pub re: R,
+    /// `1 / (1 − rinf²·e1²)`.
+    pub inv_denom: R,
+    /// Diffuse reflectance of the layer.
+    pub rdd: R,
+    /// Diffuse transmittance of the layer.
+    pub tdd: R,
+}
+
+/// The diffuse terms of a layer of medium `md` with leaf area index `lai`.
+#[inline]
+pub fn slab<R: Real>(md: &Medium<R>, lai: R) -> Slab<R> {
+    let one = R::one();
+    let e1 = (-md.m * lai).exp();
+    let e2 = e1 * e1;
+    let rinf2 = md.rinf * md.rinf;
+    let inv_denom = one / (one - rinf2 * e2);
+    Slab {
+        e1,
+        re: md.rinf * e1,
+        inv_denom,
+        rdd: md.rinf * (one - e2) * inv_denom,
+        tdd: (one - rinf2) * e1 * inv_denom,
     }
 }
 
@@ -564,85 +674,78 @@ pub struct SailOutput<R> {
     pub rdd: R,
 }
 
-/// `J1(k, l, t) = (e^(−l t) − e^(−k t)) / (k − l)` with its series form near `k = l`, given
-/// `elt = e^(−l t)` and `ekt = e^(−k t)`.
+/// `J1(k, m, t) = (e^(−m t) − e^(−k t)) / (k − m)` with its series form near `k = m`, given
+/// `k − m`, its inverse, `emt = e^(−m t)` and `ekt = e^(−k t)`.
 #[inline]
-fn jfunc1<R: Real>(k: R, l: R, t: R, elt: R, ekt: R) -> R {
-    let kl = k - l;
-    let del = kl * t;
+fn jfunc1<R: Real>(k_m: R, inv_k_m: R, t: R, emt: R, ekt: R) -> R {
+    let del = k_m * t;
     if del.value().abs() > J1_SERIES_THRESHOLD {
-        (elt - ekt) / kl
+        (emt - ekt) * inv_k_m
     } else {
-        R::c(0.5) * t * (ekt + elt) * (R::one() - del * del / R::c(12.0))
+        R::c(0.5) * t * (ekt + emt) * (R::one() - del * del / R::c(12.0))
     }
 }
 
 /// 4SAIL at one wavelength: layer `l` (geometry `e`) of medium `md` over background reflectance
-/// `soil`.
+/// `soil`. Convenience form of [`sail_parts`].
 #[inline]
 pub fn sail<R: Real>(e: &Extinction<R>, l: &Layer<R>, md: &Medium<R>, soil: R) -> SailOutput<R> {
+    sail_parts(l, md, &directional(e, md), &slab(md, l.lai), soil)
+}
+
+/// 4SAIL at one wavelength from its shared parts: the layer `l`, medium `md`, the medium's
+/// directional terms `d` in the layer's geometry and its diffuse terms `s` for the layer's LAI.
+#[inline]
+pub fn sail_parts<R: Real>(
+    l: &Layer<R>,
+    md: &Medium<R>,
+    d: &Directional<R>,
+    s: &Slab<R>,
+    soil: R,
+) -> SailOutput<R> {
     let one = R::one();
-    let half = R::c(0.5);
-    let (rho, tau, m, rinf) = (md.rho, md.tau, md.m, md.rinf);
-    let sdb = half * (e.ks + e.bf);
-    let sdf = half * (e.ks - e.bf);
-    let dob = half * (e.ko + e.bf);
-    let dof = half * (e.ko - e.bf);
-    let sb = sdb * rho + sdf * tau;
-    let sf = sdf * rho + sdb * tau;
-    let vb = dob * rho + dof * tau;
-    let vf = dof * rho + dob * tau;
-    let w = e.sob * rho + e.sof * tau;
+    let (lai, tss, too) = (l.lai, l.tss, l.too);
+    let rinf = md.rinf;
 
-    let lai = l.lai;
-    let e1 = (-m * lai).exp();
-    let e2 = e1 * e1;
-    let rinf2 = rinf * rinf;
-    let re = rinf * e1;
-    let denom = one - rinf2 * e2;
+    let j1ks = jfunc1(d.ks_m, d.inv_ks_m, lai, s.e1, tss);
+    let j2ks = (one - tss * s.e1) * d.inv_ks_p;
+    let j1ko = jfunc1(d.ko_m, d.inv_ko_m, lai, s.e1, too);
+    let j2ko = (one - too * s.e1) * d.inv_ko_p;
 
-    let j1ks = jfunc1(e.ks, m, lai, e1, l.tss);
-    let j2ks = (one - (-(e.ks + m) * lai).exp()) / (e.ks + m);
-    let j1ko = jfunc1(e.ko, m, lai, e1, l.too);
-    let j2ko = (one - (-(e.ko + m) * lai).exp()) / (e.ko + m);
+    let ps = d.s_down * j1ks;
+    let qs = d.s_up * j2ks;
+    let pv = d.v_down * j1ko;
+    let qv = d.v_up * j2ko;
 
-    let ps = (sf + sb * rinf) * j1ks;
-    let qs = (sf * rinf + sb) * j2ks;
-    let pv = (vf + vb * rinf) * j1ko;
-    let qv = (vf * rinf + vb) * j2ko;
+    let (rdd, tdd) = (s.rdd, s.tdd);
+    let tsd = (ps - s.re * qs) * s.inv_denom;
+    let rsd = (qs - s.re * ps) * s.inv_denom;
+    let tdo = (pv - s.re * qv) * s.inv_denom;
+    let rdo = (qv - s.re * pv) * s.inv_denom;
 
-    let rdd = rinf * (one - e2) / denom;
-    let tdd = (one - rinf2) * e1 / denom;
-    let tsd = (ps - re * qs) / denom;
-    let rsd = (qs - re * ps) / denom;
-    let tdo = (pv - re * qv) / denom;
-    let rdo = (qv - re * pv) / denom;
-
-    let g1 = (l.z - j1ks * l.too) / (e.ko + m);
-    let g2 = (l.z - j1ko * l.tss) / (e.ks + m);
-    let tv1 = (vf * rinf + vb) * g1;
-    let tv2 = (vf + vb * rinf) * g2;
-    let t1 = tv1 * (sf + sb * rinf);
-    let t2 = tv2 * (sf * rinf + sb);
+    let g1 = (l.z - j1ks * too) * d.inv_ko_p;
+    let g2 = (l.z - j1ko * tss) * d.inv_ks_p;
+    let t1 = d.v_up * g1 * d.s_down;
+    let t2 = d.v_down * g2 * d.s_up;
     let t3 = (rdo * qs + tdo * ps) * rinf;
-    let rsod = (t1 + t2 - t3) / (one - rinf2);
-    let rsos = w * lai * l.sumint;
+    let rsod = (t1 + t2 - t3) * md.inv_1m_rinf2;
+    let rsos = d.w * lai * l.sumint;
 
-    let dn = one - soil * rdd;
-    let tdd_dn = tdd / dn;
-    let rdot = rdo + soil * (tdo + l.too) * tdd_dn;
-    let rsodt = rsod + ((l.tss + tsd) * tdo + (tsd + l.tss * soil * rdd) * l.too) * soil / dn;
+    let inv_dn = one / (one - soil * rdd);
+    let soil_tdd_dn = soil * tdd * inv_dn;
+    let rdot = rdo + (tdo + too) * soil_tdd_dn;
+    let rsodt = rsod + ((tss + tsd) * tdo + (tsd + tss * soil * rdd) * too) * soil * inv_dn;
     let rsost = rsos + l.tsstoo * soil;
     let rsot = rsost + rsodt;
-    let rsdt = rsd + (tsd + l.tss) * soil * tdd_dn;
-    let rddt = rdd + tdd * soil * tdd_dn;
+    let rsdt = rsd + (tsd + tss) * soil_tdd_dn;
+    let rddt = rdd + tdd * soil_tdd_dn;
     SailOutput {
         rsot,
         rdot,
         rsdt,
         rddt,
-        tss: l.tss,
-        too: l.too,
+        tss,
+        too,
         tsd,
         tdo,
         tdd,
@@ -776,7 +879,13 @@ mod tests {
         let (k, t) = (0.7, 2.0);
         for &l in &[0.7 - 6e-4, 0.7 - 4e-4, 0.7 + 4e-4, 0.7 + 6e-4] {
             let exact = (libm::exp(-l * t) - libm::exp(-k * t)) / (k - l);
-            let j = jfunc1(k, l, t, libm::exp(-l * t), libm::exp(-k * t));
+            let j = jfunc1(
+                k - l,
+                1.0 / (k - l),
+                t,
+                libm::exp(-l * t),
+                libm::exp(-k * t),
+            );
             assert!((j - exact).abs() < 1e-9, "{j} {exact}");
         }
     }
