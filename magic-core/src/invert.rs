@@ -3,8 +3,9 @@
 //! One path for every target: standardise the observations, run the encoder E, map its sigmoid
 //! outputs into the variables' bounds, run the forward model F (generic over [`Real`]: `f32` on the
 //! board, `f64` on the host), standardise F's output, run the correction C, and compare with the
-//! observations. Missing channels (NaN) are allowed: they enter the encoder as the training mean
-//! (standardised 0), are left out of the residual, and are reported in the flags and the station
+//! observations. Missing channels (NaN) are allowed: they first enter the encoder as the training
+//! mean (standardised 0), then [`IMPUTE_PASSES`] more passes refill them with the model's own
+//! reconstruction; they are left out of the residual and reported in the flags and the station
 //! mask.
 
 use crate::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
@@ -115,42 +116,21 @@ pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Re
         }
     }
 
-    let mut unit = [0f32; MAX_PARAMS];
-    model_encoder(model, &z[..n_obs], &mut unit[..n_params], ws)?;
-
-    let mut params = [R::zero(); MAX_PARAMS];
-    let mut physics = [R::zero(); MAX_OBS];
-    let mut recon = [R::zero(); MAX_OBS];
-    match model.variant {
-        Variant::A => {
-            for (p, u) in params.iter_mut().zip(&unit[..n_params]) {
-                *p = R::c(*u as f64);
-            }
-            let mut y = [0f32; MAX_OBS];
-            run(&model.decoder, &unit[..n_params], &mut y[..n_obs], &mut ws.nn)?;
-            destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
-        }
-        Variant::B | Variant::C => {
-            for (i, u) in unit[..n_params].iter().enumerate() {
-                let [lo, hi] = model.bounds[i];
-                params[i] = R::c(lo as f64) + R::c((hi - lo) as f64) * R::c(*u as f64);
-                if *u < 1e-3 || *u > 1.0 - 1e-3 {
-                    flags.0 |= Flags::AT_BOUND;
+    let mut pass = Pass::<R>::run(model, &z[..n_obs], ws)?;
+    if observed < n_obs {
+        // Missing channels: refill them with the model's own reconstruction and invert again.
+        for _ in 0..IMPUTE_PASSES {
+            for i in 0..n_obs {
+                if obs[i].is_nan() {
+                    z[i] = ((pass.recon[i].value() as f32) - model.obs_mean.get(i)) / model.obs_scale.get(i);
                 }
             }
-            forward(model, &params[..n_params], &mut physics[..n_obs])?;
-            if model.variant == Variant::C {
-                let mut fz = [0f32; MAX_OBS];
-                for i in 0..n_obs {
-                    fz[i] = ((physics[i].value() as f32) - model.obs_mean.get(i)) / model.obs_scale.get(i);
-                }
-                let mut y = [0f32; MAX_OBS];
-                run(&model.decoder, &fz[..n_obs], &mut y[..n_obs], &mut ws.nn)?;
-                destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
-            } else {
-                recon[..n_obs].copy_from_slice(&physics[..n_obs]);
-            }
+            pass = Pass::run(model, &z[..n_obs], ws)?;
         }
+    }
+    let Pass { params, unit, physics, recon, at_bound } = pass;
+    if at_bound {
+        flags.0 |= Flags::AT_BOUND;
     }
 
     let (mut ss, mut ss_std) = (0.0f64, 0.0f64);
@@ -180,6 +160,63 @@ pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Re
         flags,
         used,
     })
+}
+
+/// Extra passes for a day with missing channels: each refills the missing channels with the
+/// previous pass's reconstruction (an EM-style imputation by the model itself, so one model file
+/// serves every pattern of missing stations).
+pub const IMPUTE_PASSES: usize = 3;
+
+/// One encoder → F → C pass on standardised observations.
+struct Pass<R> {
+    params: [R; MAX_PARAMS],
+    unit: [f32; MAX_PARAMS],
+    physics: [R; MAX_OBS],
+    recon: [R; MAX_OBS],
+    at_bound: bool,
+}
+
+impl<R: Real> Pass<R> {
+    fn run(model: &Model<'_>, z: &[f32], ws: &mut Workspace) -> Result<Self, Error> {
+        let n_obs = z.len();
+        let n_params = model.n_params();
+        let mut unit = [0f32; MAX_PARAMS];
+        model_encoder(model, z, &mut unit[..n_params], ws)?;
+        let mut params = [R::zero(); MAX_PARAMS];
+        let mut physics = [R::zero(); MAX_OBS];
+        let mut recon = [R::zero(); MAX_OBS];
+        let mut at_bound = false;
+        match model.variant {
+            Variant::A => {
+                for (p, u) in params.iter_mut().zip(&unit[..n_params]) {
+                    *p = R::c(*u as f64);
+                }
+                let mut y = [0f32; MAX_OBS];
+                run(&model.decoder, &unit[..n_params], &mut y[..n_obs], &mut ws.nn)?;
+                destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
+            }
+            Variant::B | Variant::C => {
+                for (i, u) in unit[..n_params].iter().enumerate() {
+                    let [lo, hi] = model.bounds[i];
+                    params[i] = R::c(lo as f64) + R::c((hi - lo) as f64) * R::c(*u as f64);
+                    at_bound |= *u < 1e-3 || *u > 1.0 - 1e-3;
+                }
+                forward(model, &params[..n_params], &mut physics[..n_obs])?;
+                if model.variant == Variant::C {
+                    let mut fz = [0f32; MAX_OBS];
+                    for i in 0..n_obs {
+                        fz[i] = ((physics[i].value() as f32) - model.obs_mean.get(i)) / model.obs_scale.get(i);
+                    }
+                    let mut y = [0f32; MAX_OBS];
+                    run(&model.decoder, &fz[..n_obs], &mut y[..n_obs], &mut ws.nn)?;
+                    destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
+                } else {
+                    recon[..n_obs].copy_from_slice(&physics[..n_obs]);
+                }
+            }
+        }
+        Ok(Pass { params, unit, physics, recon, at_bound })
+    }
 }
 
 /// Runs the encoder on standardised observations, writing its outputs (sigmoid units for B/C).

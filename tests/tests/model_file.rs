@@ -1,0 +1,118 @@
+//! Model files: host encode → core decode round trip, and corrupt bytes (truncated, flipped bits,
+//! wrong version, wrong problem, sizes that do not fit) answered with a clear error, never a panic.
+
+use magic_core::model_file::{Problem, VERSION};
+use magic_core::{invert, Error, Model, Variant, Workspace};
+use magic_tests::random_mogi_model;
+use magic_train::synth;
+
+fn int8_bytes() -> Vec<u8> {
+    let m = random_mogi_model(Variant::C, 5);
+    let calib = synth::generate(synth::Scenario::Clean, 5).data.train.x[..200].to_vec();
+    m.quantize_int8(&calib).unwrap().encode().unwrap()
+}
+
+/// Recomputes the CRC after an edit so that the structural checks behind it are reached.
+fn reseal(b: &mut [u8]) {
+    let crc = crc32(&b[..b.len() - 4]);
+    let n = b.len();
+    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
+}
+
+fn crc32(data: &[u8]) -> u32 {
+    // CRC-32/ISO-HDLC, bitwise (test-only reference).
+    let mut c = 0xFFFF_FFFFu32;
+    for &byte in data {
+        c ^= byte as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 { (c >> 1) ^ 0xEDB8_8320 } else { c >> 1 };
+        }
+    }
+    !c
+}
+
+#[test]
+fn round_trip_f32_and_int8() {
+    for bytes in [random_mogi_model(Variant::C, 1).encode().unwrap(), int8_bytes()] {
+        let m = Model::decode(&bytes).unwrap();
+        assert_eq!(m.variant, Variant::C);
+        assert_eq!(m.n_obs(), 36);
+        assert_eq!(m.n_params(), 4);
+        let inv = invert::<f64>(&m, &[0.5f32; 36], &mut Workspace::default()).unwrap();
+        for j in 0..4 {
+            assert!(inv.params[j] >= m.bounds[j][0] as f64 && inv.params[j] <= m.bounds[j][1] as f64);
+        }
+    }
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    let b = int8_bytes();
+    for n in 0..b.len() {
+        let e = Model::decode(&b[..n]).unwrap_err();
+        assert!(matches!(e, Error::Truncated | Error::BadMagic | Error::CrcMismatch { .. }), "len {n}: {e}");
+    }
+}
+
+#[test]
+fn flipped_bits_are_caught() {
+    let b = int8_bytes();
+    let step = (b.len() / 997).max(1);
+    for i in (0..b.len()).step_by(step) {
+        for bit in [0, 3, 7] {
+            let mut c = b.clone();
+            c[i] ^= 1 << bit;
+            assert!(Model::decode(&c).is_err(), "flip at byte {i} bit {bit} accepted");
+        }
+    }
+}
+
+#[test]
+fn wrong_version_problem_and_sizes() {
+    let b = int8_bytes();
+    let mut v = b.clone();
+    v[4..6].copy_from_slice(&(VERSION + 1).to_le_bytes());
+    reseal(&mut v);
+    assert_eq!(Model::decode(&v).unwrap_err(), Error::UnsupportedVersion { found: VERSION + 1, supported: VERSION });
+
+    // A model for another problem kind.
+    let mut own = random_mogi_model(Variant::B, 2);
+    own.problem = Problem::Rtm;
+    assert!(own.encode().is_err(), "an RTM model without RTM support must not validate");
+
+    // Sizes that do not fit the network: one station fewer than the observation count.
+    let mut own = random_mogi_model(Variant::B, 2);
+    if let Problem::Mogi { stations, names } = &mut own.problem {
+        stations.pop();
+        names.pop();
+    }
+    let e = own.encode().unwrap_err().to_string();
+    assert!(e.contains("observations"), "{e}");
+
+    // Random garbage with a valid header and CRC.
+    let mut g = b.clone();
+    for (i, x) in g[10..].iter_mut().enumerate() {
+        *x = (i * 7919 % 251) as u8;
+    }
+    reseal(&mut g);
+    assert!(Model::decode(&g).is_err());
+}
+
+#[test]
+fn invert_rejects_bad_observations_without_panicking() {
+    let b = int8_bytes();
+    let m = Model::decode(&b).unwrap();
+    let mut ws = Workspace::default();
+    assert!(matches!(invert::<f32>(&m, &[0.0; 35], &mut ws), Err(Error::SizeMismatch { .. })));
+    let mut o = [0.0f32; 36];
+    o[3] = f32::INFINITY;
+    assert!(matches!(invert::<f32>(&m, &o, &mut ws), Err(Error::NonFinite { index: 3, .. })));
+    o[3] = 2.0e4;
+    assert!(matches!(invert::<f32>(&m, &o, &mut ws), Err(Error::OutOfRange { .. })));
+    let all_missing = [f32::NAN; 36];
+    assert!(matches!(invert::<f32>(&m, &all_missing, &mut ws), Err(Error::TooFewObservations { .. })));
+    o[3] = f32::NAN;
+    let inv = invert::<f32>(&m, &o, &mut ws).unwrap();
+    assert!(inv.flags.has(magic_core::Flags::MISSING));
+    assert_eq!(inv.used, (1 << 12) - 1, "station 3 still has its north and up channels");
+}
