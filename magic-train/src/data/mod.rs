@@ -2,6 +2,7 @@
 
 pub mod gnss;
 pub mod table;
+pub mod tenv3;
 
 use std::path::{Path, PathBuf};
 
