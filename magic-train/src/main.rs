@@ -122,6 +122,24 @@ enum Cmd {
         #[arg(long)]
         no_qemu: bool,
     },
+    /// Convert a folder of NGL `<STA>.tenv3` files to daily displacement rows (mm) for `invert`.
+    Tenv3 {
+        /// Folder holding `<STA>.tenv3` files.
+        #[arg(long)]
+        dir: PathBuf,
+        /// Output CSV (`ux_<STA>` ×S, `uy_<STA>` ×S, `uz_<STA>` ×S, `date`; NaN = missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Station order from a `stations.json` (default: every file in the folder, by name).
+        #[arg(long, conflicts_with = "model")]
+        stations: Option<PathBuf>,
+        /// Station order from a model file.
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Reference epoch `YYYY-MM-DD` (default: the first day every station has data).
+        #[arg(long)]
+        reference: Option<String>,
+    },
 }
 
 #[derive(Subcommand)]
@@ -268,6 +286,37 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
             demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
         }
+        Cmd::Tenv3 { dir, out, stations, model, reference } => {
+            tenv3_cmd(&dir, &out, stations.as_deref(), model.as_deref(), reference.as_deref())?;
+        }
+    }
+    Ok(())
+}
+
+fn tenv3_cmd(dir: &Path, out: &Path, stations: Option<&Path>, model: Option<&Path>, reference: Option<&str>) -> Result<()> {
+    use magic_train::data::tenv3;
+    let names = match (stations, model) {
+        (Some(p), _) => Some(read_stations(p)?.0),
+        (_, Some(p)) => Some(tenv3::model_station_names(&decode(p, &read_model(p)?)?)?),
+        _ => None,
+    };
+    let reference = match reference {
+        Some(r) => tenv3::Reference::Day(tenv3::parse_ymd(r).with_context(|| format!("--reference {r}: expected YYYY-MM-DD"))?),
+        None => tenv3::Reference::Auto,
+    };
+    let read = tenv3::read_dir(dir, names.as_deref(), reference)?;
+    for e in &read.errors {
+        eprintln!("{e}");
+    }
+    for n in &read.notes {
+        eprintln!("note: {n}");
+    }
+    read.daily.write_csv(out)?;
+    let d = &read.daily;
+    let span = if d.is_empty() { String::new() } else { format!(", {} … {}", d.date(0), d.date(d.len() - 1)) };
+    eprintln!("{} stations, {} days{span}, {} bad lines skipped -> {}", d.stations.len(), d.len(), read.errors.len(), out.display());
+    if !read.errors.is_empty() {
+        bail!("{} bad lines or files in {} (skipped; everything else was written)", read.errors.len(), dir.display());
     }
     Ok(())
 }
