@@ -11,6 +11,7 @@ pub mod export;
 pub mod nets;
 pub mod physics;
 pub mod records;
+pub mod reproduce;
 pub mod synth;
 pub mod pipeline;
 pub mod train;

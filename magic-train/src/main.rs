@@ -103,6 +103,23 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Reproduce a table of the paper over several seeds (mean ± std).
+    Reproduce {
+        /// Which table: `mogi` (Table 4).
+        problem: String,
+        /// Data folder.
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Seeds, comma-separated.
+        #[arg(long, default_value = "1,2,3", value_delimiter = ',')]
+        seeds: Vec<u64>,
+        /// Maximum epochs.
+        #[arg(long, default_value_t = 100)]
+        epochs: usize,
+        /// Write the numbers as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// The main job: train C and B, evaluate, export int8, run the test days on the firmware.
     Demo {
         /// Data folder laid out like `shared/data/gnss` (default: $MAGIC_DATA/gnss, ../shared/data/gnss,
@@ -282,6 +299,17 @@ fn run(cli: Cli) -> Result<()> {
             synth::write_dir(&s.data, &out)?;
             std::fs::write(out.join("truth.json"), serde_json::to_string_pretty(&s.truth)?)?;
             eprintln!("wrote synthetic dataset ({}) -> {}", s.data.source, out.display());
+        }
+        Cmd::Reproduce { problem, data_dir, seeds, epochs, json } => {
+            if problem != "mogi" {
+                bail!("reproduce {problem}: expected `mogi`");
+            }
+            let data = load_gnss(data_dir.as_deref())?;
+            let cfg = TrainConfig { epochs, ..TrainConfig::gnss() };
+            let v = magic_train::reproduce::table4(&data, &seeds, &cfg)?;
+            if let Some(p) = json {
+                std::fs::write(&p, serde_json::to_string_pretty(&v)?).with_context(|| format!("{}: cannot write", p.display()))?;
+            }
         }
         Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
             demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
