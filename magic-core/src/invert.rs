@@ -10,7 +10,8 @@
 
 use crate::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
 use crate::nn::{run, Scratch};
-use crate::{mogi, Error, Real};
+use crate::effects::mogi_with_effects;
+use crate::{Error, Real};
 
 /// Largest absolute observation accepted, in the model's physical unit (mm for GNSS: 10 m).
 pub const MAX_ABS_OBS: f64 = 1.0e4;
@@ -76,6 +77,12 @@ pub struct Workspace {
 /// # Ok::<(), magic_core::Error>(())
 /// ```
 pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Result<Inversion<R>, Error> {
+    invert_at(model, obs, f64::NAN, ws)
+}
+
+/// [`invert`] for an observation made on day `t_day` (days since 1970-01-01; NaN when unknown,
+/// which is an error only for models with time-dependent effects).
+pub fn invert_at<R: Real>(model: &Model<'_>, obs: &[f32], t_day: f64, ws: &mut Workspace) -> Result<Inversion<R>, Error> {
     let n_obs = model.n_obs();
     if obs.len() != n_obs {
         return Err(Error::SizeMismatch { what: "observations", expected: n_obs, found: obs.len() });
@@ -116,7 +123,7 @@ pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Re
         }
     }
 
-    let mut pass = Pass::<R>::run(model, &z[..n_obs], ws)?;
+    let mut pass = Pass::<R>::run(model, &z[..n_obs], t_day, ws)?;
     if observed < n_obs {
         // Missing channels: refill them with the model's own reconstruction and invert again.
         for _ in 0..IMPUTE_PASSES {
@@ -125,7 +132,7 @@ pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Re
                     z[i] = ((pass.recon[i].value() as f32) - model.obs_mean.get(i)) / model.obs_scale.get(i);
                 }
             }
-            pass = Pass::run(model, &z[..n_obs], ws)?;
+            pass = Pass::run(model, &z[..n_obs], t_day, ws)?;
         }
     }
     let Pass { params, unit, physics, recon, at_bound } = pass;
@@ -177,7 +184,7 @@ struct Pass<R> {
 }
 
 impl<R: Real> Pass<R> {
-    fn run(model: &Model<'_>, z: &[f32], ws: &mut Workspace) -> Result<Self, Error> {
+    fn run(model: &Model<'_>, z: &[f32], t_day: f64, ws: &mut Workspace) -> Result<Self, Error> {
         let n_obs = z.len();
         let n_params = model.n_params();
         let mut unit = [0f32; MAX_PARAMS];
@@ -201,7 +208,7 @@ impl<R: Real> Pass<R> {
                     params[i] = R::c(lo as f64) + R::c((hi - lo) as f64) * R::c(*u as f64);
                     at_bound |= *u < 1e-3 || *u > 1.0 - 1e-3;
                 }
-                forward(model, &params[..n_params], &mut physics[..n_obs])?;
+                forward(model, &params[..n_params], t_day, &mut physics[..n_obs])?;
                 if model.variant == Variant::C {
                     let mut fz = [0f32; MAX_OBS];
                     for i in 0..n_obs {
@@ -224,16 +231,11 @@ pub fn model_encoder(model: &Model<'_>, z: &[f32], out: &mut [f32], ws: &mut Wor
     run(&model.encoder, z, out, &mut ws.nn)
 }
 
-/// The model's forward model F: physical variables → observations in physical units.
-pub fn forward<R: Real>(model: &Model<'_>, params: &[R], out: &mut [R]) -> Result<(), Error> {
+/// The model's forward model F with its declared effects: physical variables → observations in
+/// physical units, for an observation on day `t_day` (NaN if unknown).
+pub fn forward<R: Real>(model: &Model<'_>, params: &[R], t_day: f64, out: &mut [R]) -> Result<(), Error> {
     match &model.problem {
-        Problem::Mogi { stations, .. } => {
-            let p: [R; mogi::N_PARAMS] = params
-                .get(..mogi::N_PARAMS)
-                .and_then(|s| s.try_into().ok())
-                .ok_or(Error::SizeMismatch { what: "mogi parameters", expected: mogi::N_PARAMS, found: params.len() })?;
-            mogi::field(stations, &p, out)
-        }
+        Problem::Mogi { stations, .. } => mogi_with_effects(stations, &model.effects, params, t_day, out),
         Problem::Rtm => Err(Error::WrongProblem),
     }
 }

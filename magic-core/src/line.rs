@@ -29,6 +29,8 @@ pub enum LineError {
         /// 1-based field.
         field: usize,
     },
+    /// The leading date field is not `YYYY-MM-DD` or `YYYY.MM.DD`.
+    BadDate,
     /// The inversion failed.
     Invert(Error),
 }
@@ -41,6 +43,7 @@ impl fmt::Display for LineError {
             }
             LineError::NotANumber { field } => write!(f, "field {field}: not a number"),
             LineError::OutOfRange { field } => write!(f, "field {field}: infinite or beyond 10 m"),
+            LineError::BadDate => write!(f, "field 1: expected a date YYYY-MM-DD"),
             LineError::Invert(e) => write!(f, "{e}"),
         }
     }
@@ -78,6 +81,31 @@ pub fn parse_obs(line: &str, out: &mut [f32]) -> Result<(), LineError> {
         return Err(LineError::FieldCount { expected: out.len(), found: n });
     }
     Ok(())
+}
+
+/// Parses a record for a model: when `with_date`, the first field is the observation's date
+/// (`YYYY-MM-DD` or `YYYY.MM.DD`) and the observations follow. Returns the day number (NaN without
+/// a date).
+///
+/// ```
+/// let mut v = [0f32; 2];
+/// let t = magic_core::line::parse_record("2006-01-02,1,2", true, &mut v).unwrap();
+/// assert_eq!((t, v), (13150.0, [1.0, 2.0]));
+/// ```
+pub fn parse_record(line: &str, with_date: bool, out: &mut [f32]) -> Result<f64, LineError> {
+    if !with_date {
+        return parse_obs(line, out).map(|_| f64::NAN);
+    }
+    let line = line.trim_end_matches(['\r', '\n']);
+    let (date, rest) = line.split_once(',').ok_or(LineError::FieldCount { expected: out.len() + 1, found: 1 })?;
+    let day = crate::time::parse_date(date).ok_or(LineError::BadDate)?;
+    parse_obs(rest, out).map_err(|e| match e {
+        LineError::FieldCount { expected, found } => LineError::FieldCount { expected: expected + 1, found: found + 1 },
+        LineError::NotANumber { field } => LineError::NotANumber { field: field + 1 },
+        LineError::OutOfRange { field } => LineError::OutOfRange { field: field + 1 },
+        other => other,
+    })?;
+    Ok(day as f64)
 }
 
 /// Writes the result row of an inversion (no newline).

@@ -10,6 +10,7 @@
 //! this build was compiled for, so a corrupt, truncated or foreign file is an [`Error`], never a
 //! panic or an out-of-bounds read.
 
+use crate::effects::{Effect, MAX_EFFECTS};
 use crate::mogi::{self, Station};
 use crate::nn::{validate_chain, Activation, Layer, MAX_LAYERS};
 use crate::quant::LeF32;
@@ -19,7 +20,7 @@ use serde::{Deserialize, Serialize};
 /// The first four bytes of every model file.
 pub const MAGIC: [u8; 4] = *b"MAGC";
 /// The format version this build reads and writes.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Largest station network the compiled core accepts.
 pub const MAX_STATIONS: usize = 32;
 /// Largest number of physical variables (source parameters plus effect parameters).
@@ -88,6 +89,9 @@ pub struct Model<'a> {
     pub decoder: heapless::Vec<Layer<'a>, MAX_LAYERS>,
     /// Residual RMS (standardised units) above which an inversion is flagged; 0 disables.
     pub residual_threshold: f32,
+    /// Declared effects added to F (their latent variables follow the source's in `bounds`).
+    #[serde(borrow)]
+    pub effects: heapless::Vec<Effect<'a>, MAX_EFFECTS>,
 }
 
 impl<'a> Model<'a> {
@@ -99,6 +103,11 @@ impl<'a> Model<'a> {
     /// Number of physical variables the encoder outputs (latent size for variant A).
     pub fn n_params(&self) -> usize {
         self.encoder.last().map_or(0, |l| l.rows as usize)
+    }
+
+    /// Whether inversions need the observation's date (a time-dependent effect is declared).
+    pub fn needs_time(&self) -> bool {
+        self.effects.iter().any(|e| e.needs_time())
     }
 
     /// Stations of a Mogi model.
@@ -188,7 +197,10 @@ impl<'a> Model<'a> {
                 if !stations.iter().all(|s| s.x_km.is_finite() && s.y_km.is_finite() && s.z_km.is_finite()) {
                     return Err(Error::InvalidModel("non-finite station position"));
                 }
-                mogi::N_PARAMS
+                for e in &self.effects {
+                    e.validate(stations.len())?;
+                }
+                mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
             }
             Problem::Rtm => return Err(Error::InvalidModel("RTM models are not supported by this build")),
         };

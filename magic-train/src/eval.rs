@@ -3,7 +3,7 @@
 
 use crate::data::gnss::Split;
 use anyhow::{anyhow, Result};
-use magic_core::{invert, Model, Variant, Workspace};
+use magic_core::{invert_at, Model, Variant, Workspace};
 use serde::Serialize;
 
 /// The paper's MSE and its parts on one split.
@@ -29,11 +29,11 @@ pub fn evaluate(model: &Model<'_>, split: &Split, name: &str) -> Result<EvalResu
     let mut per = vec![0f64; n_obs];
     let mut phys = 0f64;
     let mut obs = vec![0f32; n_obs];
-    for row in &split.x {
+    for (row, t) in split.x.iter().zip(split.days()) {
         for c in 0..n_obs {
             obs[c] = row[c] * model.obs_scale.get(c) + model.obs_mean.get(c);
         }
-        let inv = invert::<f64>(model, &obs, &mut ws).map_err(|e| anyhow!("{e}"))?;
+        let inv = invert_at::<f64>(model, &obs, t, &mut ws).map_err(|e| anyhow!("{e}"))?;
         for c in 0..n_obs {
             let s = model.obs_scale.get(c) as f64;
             let m = model.obs_mean.get(c) as f64;

@@ -3,6 +3,7 @@
 
 use crate::nets::{Mlp, Net};
 use anyhow::{bail, Context, Result};
+use magic_core::effects::Effect;
 use magic_core::model_file::{Model, Problem, Variant};
 use magic_core::nn::{Activation, Layer, Weights};
 use magic_core::quant::{quantize_multiplier, LeF32, LeI32};
@@ -49,6 +50,94 @@ pub struct OwnedLayer {
     pub weights: OwnedWeights,
 }
 
+/// A declared effect owned by the host (see `magic_core::effects::Effect`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "family", rename_all = "snake_case")]
+pub enum OwnedEffect {
+    /// Daily network translation (3 latent variables).
+    CommonMode,
+    /// Vertical term linear in elevation (1 latent variable).
+    Elevation {
+        /// Reference elevation (km).
+        z_ref_km: f32,
+    },
+    /// Second Mogi source at a fixed position (1 latent variable: its ΔV).
+    SecondSource {
+        /// East (km).
+        x_km: f32,
+        /// North (km).
+        y_km: f32,
+        /// Depth (km).
+        depth_km: f32,
+    },
+    /// Per-channel annual + semiannual coefficients (4 per channel).
+    Seasonal {
+        /// Coefficients (mm).
+        coef: Vec<f32>,
+    },
+    /// A step at one station.
+    Step {
+        /// Station index.
+        station: u16,
+        /// First day with the offset.
+        epoch_day: f32,
+        /// Offset (mm, E N U).
+        offset_mm: [f32; 3],
+    },
+    /// Per-channel drift.
+    Drift {
+        /// Reference day.
+        t0_day: f32,
+        /// Rates (mm/yr).
+        rate: Vec<f32>,
+    },
+}
+
+impl OwnedEffect {
+    /// Little-endian bytes of the effect's arrays (empty for effects without arrays).
+    pub fn bytes(&self) -> Vec<u8> {
+        match self {
+            OwnedEffect::Seasonal { coef } => f32_bytes(coef),
+            OwnedEffect::Drift { rate, .. } => f32_bytes(rate),
+            _ => vec![],
+        }
+    }
+
+    /// The core's view, borrowing `bytes` (from [`OwnedEffect::bytes`]).
+    pub fn borrow<'a>(&self, bytes: &'a [u8]) -> Effect<'a> {
+        match *self {
+            OwnedEffect::CommonMode => Effect::CommonMode,
+            OwnedEffect::Elevation { z_ref_km } => Effect::Elevation { z_ref_km },
+            OwnedEffect::SecondSource { x_km, y_km, depth_km } => Effect::SecondSource { x_km, y_km, depth_km },
+            OwnedEffect::Seasonal { .. } => Effect::Seasonal { coef: LeF32(bytes) },
+            OwnedEffect::Step { station, epoch_day, offset_mm } => Effect::Step { station, epoch_day, offset_mm },
+            OwnedEffect::Drift { t0_day, .. } => Effect::Drift { t0_day, rate: LeF32(bytes) },
+        }
+    }
+
+    /// Copies a core effect.
+    pub fn from_core(e: &Effect<'_>) -> OwnedEffect {
+        match *e {
+            Effect::CommonMode => OwnedEffect::CommonMode,
+            Effect::Elevation { z_ref_km } => OwnedEffect::Elevation { z_ref_km },
+            Effect::SecondSource { x_km, y_km, depth_km } => OwnedEffect::SecondSource { x_km, y_km, depth_km },
+            Effect::Seasonal { coef } => OwnedEffect::Seasonal { coef: coef.iter().collect() },
+            Effect::Step { station, epoch_day, offset_mm } => OwnedEffect::Step { station, epoch_day, offset_mm },
+            Effect::Drift { t0_day, rate } => OwnedEffect::Drift { t0_day, rate: rate.iter().collect() },
+        }
+    }
+
+    /// Number of latent variables.
+    pub fn n_latent(&self) -> usize {
+        self.borrow(&[]).n_latent()
+    }
+
+    /// Family name.
+    pub fn family(&self) -> &'static str {
+        self.borrow(&[]).family()
+    }
+}
+
 /// A model owned by the host, convertible to and from model-file bytes.
 #[derive(Clone, Debug)]
 pub struct OwnedModel {
@@ -68,6 +157,8 @@ pub struct OwnedModel {
     pub decoder: Vec<OwnedLayer>,
     /// Residual flag threshold (standardised RMS).
     pub residual_threshold: f32,
+    /// Declared effects.
+    pub effects: Vec<OwnedEffect>,
 }
 
 fn f32_bytes(v: &[f32]) -> Vec<u8> {
@@ -133,7 +224,13 @@ impl OwnedModel {
         for b in &self.bounds {
             bounds.push(*b).map_err(|_| anyhow::anyhow!("too many variables"))?;
         }
+        let eff_b: Vec<Vec<u8>> = self.effects.iter().map(OwnedEffect::bytes).collect();
+        let mut effects = heapless::Vec::new();
+        for (e, b) in self.effects.iter().zip(&eff_b) {
+            effects.push(e.borrow(b)).map_err(|_| anyhow::anyhow!("too many effects"))?;
+        }
         let model = Model {
+            effects,
             variant: self.variant,
             problem: self.problem.clone(),
             obs_mean: LeF32(&mean),
@@ -143,7 +240,7 @@ impl OwnedModel {
             decoder,
             residual_threshold: self.residual_threshold,
         };
-        let mut buf = vec![0u8; 64 * 1024 + 8 * mean.len() + enc_b.iter().chain(&dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
+        let mut buf = vec![0u8; 64 * 1024 + 8 * mean.len() + eff_b.iter().map(Vec::len).sum::<usize>() + enc_b.iter().chain(&dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
         let n = model.encode(&mut buf).map_err(|e| anyhow::anyhow!("encoding the model: {e}"))?;
         buf.truncate(n);
         Model::decode(&buf).map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
@@ -176,11 +273,12 @@ impl OwnedModel {
             encoder: m.encoder.iter().map(own).collect(),
             decoder: m.decoder.iter().map(own).collect(),
             residual_threshold: m.residual_threshold,
+            effects: m.effects.iter().map(OwnedEffect::from_core).collect(),
         }
     }
 
-    /// Builds the f32 model of a trained network.
-    pub fn from_net(net: &Net, problem: Problem) -> Result<OwnedModel> {
+    /// Builds the f32 model of a trained network (with the effects its physics declares).
+    pub fn from_net(net: &Net, problem: Problem, effects: Vec<OwnedEffect>) -> Result<OwnedModel> {
         let layers = |m: &Mlp| -> Result<Vec<OwnedLayer>> {
             m.layers
                 .iter()
@@ -208,6 +306,7 @@ impl OwnedModel {
                 None => vec![],
             },
             residual_threshold: 0.0,
+            effects,
         })
     }
 
@@ -215,6 +314,12 @@ impl OwnedModel {
     /// resolves only 1/256 of a variable's range). Activation scales are calibrated on `calib`
     /// (standardised observations): the largest absolute input each layer sees, over 127.
     pub fn quantize_int8(&self, calib: &[Vec<f32>]) -> Result<OwnedModel> {
+        self.quantize_int8_at(calib, &[])
+    }
+
+    /// [`OwnedModel::quantize_int8`] with the calibration rows' day numbers (needed when the model
+    /// declares time-dependent effects).
+    pub fn quantize_int8_at(&self, calib: &[Vec<f32>], days: &[f64]) -> Result<OwnedModel> {
         if calib.is_empty() {
             bail!("int8 export needs calibration data");
         }
@@ -226,22 +331,24 @@ impl OwnedModel {
         out.encoder = quantize_chain(&self.encoder, &enc_max, if keep_f32_last { n_enc - 1 } else { n_enc })?;
         if !self.decoder.is_empty() {
             // Decoder inputs: what the f32 model feeds it.
-            let dec_in = self.decoder_inputs(calib)?;
+            let dec_in = self.decoder_inputs(calib, days)?;
             let dec_max = max_abs_inputs(&self.decoder, &dec_in)?;
             out.decoder = quantize_chain(&self.decoder, &dec_max, self.decoder.len())?;
         }
         Ok(out)
     }
 
-    /// The decoder's inputs on `x` (standardised observations), computed with the f32 model.
-    fn decoder_inputs(&self, x: &[Vec<f32>]) -> Result<Vec<Vec<f32>>> {
+    /// The decoder's inputs on `x` (standardised observations, on days `days`), computed with the
+    /// f32 model.
+    fn decoder_inputs(&self, x: &[Vec<f32>], days: &[f64]) -> Result<Vec<Vec<f32>>> {
         let bytes = self.encode()?;
         let model = Model::decode(&bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
         let mut ws = magic_core::Workspace::default();
         let mut out = Vec::with_capacity(x.len());
-        for row in x {
+        for (i, row) in x.iter().enumerate() {
             let obs: Vec<f32> = row.iter().enumerate().map(|(c, v)| v * self.scale[c] + self.mean[c]).collect();
-            let inv = magic_core::invert::<f64>(&model, &obs, &mut ws).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let t = days.get(i).copied().unwrap_or(f64::NAN);
+            let inv = magic_core::invert_at::<f64>(&model, &obs, t, &mut ws).map_err(|e| anyhow::anyhow!("{e}"))?;
             out.push(match self.variant {
                 Variant::A => inv.params[..inv.n_params].iter().map(|v| *v as f32).collect(),
                 _ => (0..inv.n_obs).map(|c| ((inv.physics[c] - self.mean[c] as f64) / self.scale[c] as f64) as f32).collect(),

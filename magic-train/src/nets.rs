@@ -171,8 +171,9 @@ impl Net {
         u.broadcast_mul(&self.span)?.broadcast_add(&self.lo)
     }
 
-    /// Forward pass on standardised observations `(batch, n_obs)`.
-    pub fn forward(&self, x: &Tensor) -> Result<Outputs> {
+    /// Forward pass on standardised observations `(batch, n_obs)` made on days `days` `(batch, 1)`
+    /// (day numbers; NaN where unknown).
+    pub fn forward(&self, x: &Tensor, days: &Tensor) -> Result<Outputs> {
         match self.variant {
             Variant::A => {
                 let z = self.encoder.forward(x)?;
@@ -182,7 +183,8 @@ impl Net {
             Variant::B | Variant::C => {
                 let z = self.variables(x)?;
                 let phys = self.physics.as_ref().expect("variants B and C have physics");
-                let mm = z.apply_op1(PhysicsOp(phys.clone()))?;
+                let zt = Tensor::cat(&[&z, &days.to_dtype(z.dtype())?], 1)?;
+                let mm = zt.apply_op1(PhysicsOp(phys.clone()))?;
                 let fz = mm.broadcast_sub(&self.mean_t)?.broadcast_div(&self.scale_t)?;
                 let recon = match &self.decoder {
                     Some(c) => c.forward(&fz)?,
@@ -229,6 +231,11 @@ pub fn smoothness(f: &Tensor, n_seq: usize, t: usize) -> Result<Tensor> {
     let s = f.reshape((n_seq, t, n))?;
     let d = s.narrow(1, 1, t - 1)?.sub(&s.narrow(1, 0, t - 1)?)?;
     d.sqr()?.sum_all()
+}
+
+/// A `(rows, 1)` f32 tensor of day numbers.
+pub fn days_tensor(days: &[f64]) -> Result<Tensor> {
+    Tensor::from_vec(days.iter().map(|d| *d as f32).collect::<Vec<f32>>(), (days.len(), 1), &Device::Cpu)
 }
 
 /// A `(rows, n)` f32 tensor from rows.

@@ -6,7 +6,10 @@
 //! the physics in the trainer.
 
 use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
+use crate::export::OwnedEffect;
+use magic_core::effects::mogi_with_effects;
 use magic_core::mogi::{self, Station};
+use magic_core::Dual;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -16,50 +19,63 @@ pub trait Physics: Send + Sync {
     fn n_params(&self) -> usize;
     /// Number of outputs.
     fn n_obs(&self) -> usize;
-    /// Values: `out` has `n_obs` entries.
-    fn forward(&self, p: &[f64], out: &mut [f64]) -> Result<(), magic_core::Error>;
+    /// Values for an observation on day `t` (NaN if unknown): `out` has `n_obs` entries.
+    fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), magic_core::Error>;
     /// Values and Jacobian (`jac` row-major, `n_obs × n_params`).
-    fn jacobian(&self, p: &[f64], out: &mut [f64], jac: &mut [f64]) -> Result<(), magic_core::Error>;
+    fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), magic_core::Error>;
 }
 
-/// The Mogi source under a station network.
+/// The Mogi source under a station network, with declared effects.
 #[derive(Clone, Debug)]
 pub struct MogiPhysics {
     /// Stations in channel order.
     pub stations: Vec<Station>,
+    /// Declared effects (latent variables follow the source's four).
+    pub effects: Vec<OwnedEffect>,
 }
+
+impl MogiPhysics {
+    /// The source alone.
+    pub fn new(stations: Vec<Station>) -> Self {
+        MogiPhysics { stations, effects: vec![] }
+    }
+}
+
+/// Largest number of variables the trainer differentiates for (source plus effect latents).
+const MAX_DUAL: usize = 16;
 
 impl Physics for MogiPhysics {
     fn n_params(&self) -> usize {
-        mogi::N_PARAMS
+        mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
     }
     fn n_obs(&self) -> usize {
         3 * self.stations.len()
     }
-    fn forward(&self, p: &[f64], out: &mut [f64]) -> Result<(), magic_core::Error> {
-        let p: [f64; 4] = p.try_into().map_err(|_| magic_core::Error::SizeMismatch {
-            what: "mogi parameters",
-            expected: 4,
-            found: p.len(),
-        })?;
-        mogi::field(&self.stations, &p, out)
+    fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), magic_core::Error> {
+        let bytes: Vec<_> = self.effects.iter().map(OwnedEffect::bytes).collect();
+        let eff: Vec<_> = self.effects.iter().zip(&bytes).map(|(e, b)| e.borrow(b)).collect();
+        mogi_with_effects(&self.stations, &eff, p, t, out)
     }
-    fn jacobian(&self, p: &[f64], out: &mut [f64], jac: &mut [f64]) -> Result<(), magic_core::Error> {
-        let p: [f64; 4] = p.try_into().map_err(|_| magic_core::Error::SizeMismatch {
-            what: "mogi parameters",
-            expected: 4,
-            found: p.len(),
-        })?;
-        let mut j = vec![[0.0; 4]; out.len()];
-        mogi::field_jacobian(&self.stations, &p, out, &mut j)?;
-        for (dst, src) in jac.chunks_exact_mut(4).zip(&j) {
-            dst.copy_from_slice(src);
+    fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), magic_core::Error> {
+        let n = self.n_params();
+        if n > MAX_DUAL || p.len() != n {
+            return Err(magic_core::Error::SizeMismatch { what: "variables", expected: n.min(MAX_DUAL), found: p.len() });
+        }
+        let bytes: Vec<_> = self.effects.iter().map(OwnedEffect::bytes).collect();
+        let eff: Vec<_> = self.effects.iter().zip(&bytes).map(|(e, b)| e.borrow(b)).collect();
+        let pd: Vec<Dual<MAX_DUAL>> = p.iter().enumerate().map(|(j, v)| Dual::var(*v, j)).collect();
+        let mut o = vec![Dual::<MAX_DUAL>::constant(0.0); out.len()];
+        mogi_with_effects(&self.stations, &eff, &pd, t, &mut o)?;
+        for (c, oc) in o.iter().enumerate() {
+            out[c] = oc.v;
+            jac[c * n..(c + 1) * n].copy_from_slice(&oc.d[..n]);
         }
         Ok(())
     }
 }
 
-/// The candle op applying a [`Physics`] to a `(batch, n_params)` f32 tensor.
+/// The candle op applying a [`Physics`] to a `(batch, n_params + 1)` tensor: the variables, then
+/// the day number of each row (NaN if unknown; it receives no gradient).
 #[derive(Clone)]
 pub struct PhysicsOp(pub Arc<dyn Physics>);
 
@@ -73,7 +89,8 @@ impl CustomOp1 for PhysicsOp {
     }
 
     fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
-        let (b, p) = layout.shape().dims2()?;
+        let (b, p1) = layout.shape().dims2()?;
+        let p = p1 - 1;
         let (start, end) = layout
             .contiguous_offsets()
             .ok_or_else(|| candle_core::Error::Msg("physics op needs a contiguous input".into()))?;
@@ -85,8 +102,8 @@ impl CustomOp1 for PhysicsOp {
         let n = self.0.n_obs();
         let mut out = vec![0f64; b * n];
         out.par_chunks_mut(n)
-            .zip(input.par_chunks(p))
-            .try_for_each(|(o, z)| self.0.forward(z, o))
+            .zip(input.par_chunks(p1))
+            .try_for_each(|(o, z)| self.0.forward(&z[..p], z[p], o))
             .map_err(core_err)?;
         let storage = match storage {
             CpuStorage::F64(_) => CpuStorage::F64(out),
@@ -96,17 +113,18 @@ impl CustomOp1 for PhysicsOp {
     }
 
     fn bwd(&self, arg: &Tensor, _res: &Tensor, grad: &Tensor) -> candle_core::Result<Option<Tensor>> {
-        let (b, p) = arg.dims2()?;
+        let (b, p1) = arg.dims2()?;
+        let p = p1 - 1;
         let n = self.0.n_obs();
         let z = arg.to_dtype(candle_core::DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
         let g = grad.to_dtype(candle_core::DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
-        let mut gz = vec![0f64; b * p];
-        gz.par_chunks_mut(p)
+        let mut gz = vec![0f64; b * p1];
+        gz.par_chunks_mut(p1)
             .enumerate()
             .try_for_each(|(i, gi)| {
                 let mut out = vec![0f64; n];
                 let mut jac = vec![0f64; n * p];
-                self.0.jacobian(&z[i * p..(i + 1) * p], &mut out, &mut jac)?;
+                self.0.jacobian(&z[i * p1..i * p1 + p], z[i * p1 + p], &mut out, &mut jac)?;
                 for c in 0..n {
                     let gc = g[i * n + c];
                     for j in 0..p {
@@ -116,7 +134,7 @@ impl CustomOp1 for PhysicsOp {
                 Ok(())
             })
             .map_err(core_err)?;
-        let t = Tensor::from_vec(gz, (b, p), arg.device())?.to_dtype(arg.dtype())?;
+        let t = Tensor::from_vec(gz, (b, p1), arg.device())?.to_dtype(arg.dtype())?;
         Ok(Some(t))
     }
 }
@@ -128,22 +146,20 @@ mod tests {
 
     #[test]
     fn gradient_through_op_matches_finite_differences() {
-        let phys: Arc<dyn Physics> = Arc::new(MogiPhysics {
-            stations: vec![
-                Station { x_km: -4.0, y_km: 6.0, z_km: 0.3 },
-                Station { x_km: 10.0, y_km: 0.5, z_km: 0.4 },
-            ],
-        });
+        let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(vec![
+            Station { x_km: -4.0, y_km: 6.0, z_km: 0.3 },
+            Station { x_km: 10.0, y_km: 0.5, z_km: 0.4 },
+        ]));
         let dev = Device::Cpu;
         let z0 = [1.0f64, -0.5, 6.0, 2.0];
-        let z = Var::from_vec(z0.to_vec(), (1, 4), &dev).unwrap();
+        let z = Var::from_vec(vec![1.0, -0.5, 6.0, 2.0, f64::NAN], (1, 5), &dev).unwrap();
         let y = z.as_tensor().apply_op1(PhysicsOp(phys.clone())).unwrap();
         let loss = y.sqr().unwrap().sum_all().unwrap();
         let grads = loss.backward().unwrap();
         let g = grads.get(&z).unwrap().flatten_all().unwrap().to_vec1::<f64>().unwrap();
         let f = |p: &[f64]| {
             let mut o = vec![0.0; 6];
-            phys.forward(p, &mut o).unwrap();
+            phys.forward(p, f64::NAN, &mut o).unwrap();
             o.iter().map(|v| v * v).sum::<f64>()
         };
         for j in 0..4 {

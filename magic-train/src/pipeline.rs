@@ -2,14 +2,14 @@
 //! dataset and turn it into a model file.
 
 use crate::data::gnss::GnssData;
-use crate::export::OwnedModel;
+use crate::export::{OwnedEffect, OwnedModel};
 use crate::nets::Net;
 use crate::physics::{MogiPhysics, Physics};
-use crate::train::{train, TrainConfig, TrainLog};
+use crate::train::{train, Rows, TrainConfig, TrainLog};
 use anyhow::{anyhow, Result};
 use magic_core::model_file::Problem;
 use magic_core::mogi::{Station, PAPER_BOUNDS};
-use magic_core::{invert, Model, Variant, Workspace};
+use magic_core::{invert_at, Model, Variant, Workspace};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::sync::Arc;
@@ -29,9 +29,33 @@ pub fn mogi_problem(names: &[String], stations: &[Station]) -> Result<Problem> {
 
 /// Trains a Mogi model of `variant` on `data` and returns it as an f32 model with its log.
 pub fn train_mogi(data: &GnssData, variant: Variant, cfg: &TrainConfig, seed: u64) -> Result<(OwnedModel, TrainLog)> {
+    train_mogi_with(data, variant, &[], cfg, seed)
+}
+
+/// Latent-variable bounds of an effect.
+pub fn effect_bounds(e: &OwnedEffect) -> Vec<[f64; 2]> {
+    match e {
+        OwnedEffect::CommonMode => vec![[-30.0, 30.0]; 3],
+        OwnedEffect::Elevation { .. } => vec![[-200.0, 200.0]],
+        OwnedEffect::SecondSource { .. } => vec![[-10.0, 10.0]],
+        _ => vec![],
+    }
+}
+
+/// [`train_mogi`] with declared effects added to F.
+pub fn train_mogi_with(
+    data: &GnssData,
+    variant: Variant,
+    effects: &[OwnedEffect],
+    cfg: &TrainConfig,
+    seed: u64,
+) -> Result<(OwnedModel, TrainLog)> {
     let mut rng = StdRng::seed_from_u64(seed);
-    let physics: Arc<dyn Physics> = Arc::new(MogiPhysics { stations: data.stations.clone() });
-    let bounds: Vec<[f64; 2]> = PAPER_BOUNDS.to_vec();
+    let physics: Arc<dyn Physics> = Arc::new(MogiPhysics { stations: data.stations.clone(), effects: effects.to_vec() });
+    let mut bounds: Vec<[f64; 2]> = PAPER_BOUNDS.to_vec();
+    for e in effects {
+        bounds.extend(effect_bounds(e));
+    }
     let net = Net::new(
         variant,
         data.n_obs(),
@@ -42,21 +66,22 @@ pub fn train_mogi(data: &GnssData, variant: Variant, cfg: &TrainConfig, seed: u6
         4,
         &mut rng,
     )?;
-    let log = train(&net, &data.train.x, &data.valid.x, cfg, &mut rng)?;
-    let mut model = OwnedModel::from_net(&net, mogi_problem(&data.names, &data.stations)?)?;
-    model.residual_threshold = residual_threshold(&model, &data.valid.x)?;
+    let (td, vd) = (data.train.days(), data.valid.days());
+    let log = train(&net, Rows { x: &data.train.x, days: &td }, Rows { x: &data.valid.x, days: &vd }, cfg, &mut rng)?;
+    let mut model = OwnedModel::from_net(&net, mogi_problem(&data.names, &data.stations)?, effects.to_vec())?;
+    model.residual_threshold = residual_threshold(&model, &data.valid.x, &vd)?;
     Ok((model, log))
 }
 
 /// The 99th percentile of the standardised residual RMS on `x`: inversions above it are flagged.
-pub fn residual_threshold(model: &OwnedModel, x: &[Vec<f32>]) -> Result<f32> {
+pub fn residual_threshold(model: &OwnedModel, x: &[Vec<f32>], days: &[f64]) -> Result<f32> {
     let bytes = model.encode()?;
     let m = Model::decode(&bytes).map_err(|e| anyhow!("{e}"))?;
     let mut ws = Workspace::default();
     let mut r = Vec::with_capacity(x.len());
-    for row in x {
+    for (row, t) in x.iter().zip(days) {
         let obs: Vec<f32> = row.iter().enumerate().map(|(c, v)| v * model.scale[c] + model.mean[c]).collect();
-        r.push(invert::<f64>(&m, &obs, &mut ws).map_err(|e| anyhow!("{e}"))?.residual_rms_std);
+        r.push(invert_at::<f64>(&m, &obs, *t, &mut ws).map_err(|e| anyhow!("{e}"))?.residual_rms_std);
     }
     if r.is_empty() {
         return Ok(0.0);

@@ -10,7 +10,7 @@ use crate::data::table::Table;
 use anyhow::{anyhow, bail, Result};
 use magic_core::line::{write_error, write_result, LineError};
 use magic_core::model_file::Problem;
-use magic_core::{invert, Model, Workspace};
+use magic_core::{invert_at, Model, Workspace};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -20,6 +20,13 @@ pub struct ObsRow {
     pub date: Option<String>,
     /// Observations (NaN = missing), or the error message naming file:line:column.
     pub obs: std::result::Result<Vec<f32>, String>,
+}
+
+impl ObsRow {
+    /// Day number of the row's date (NaN without a date).
+    pub fn day(&self) -> f64 {
+        self.date.as_deref().map_or(f64::NAN, crate::data::gnss::day_number)
+    }
 }
 
 /// Channel names of a model (`ux_<STA>` …).
@@ -87,7 +94,7 @@ pub fn invert_rows(model: &Model<'_>, rows: &[ObsRow]) -> Vec<String> {
         .map(|row| {
             let mut s = String::new();
             match &row.obs {
-                Ok(obs) => match invert::<f64>(model, obs, &mut ws) {
+                Ok(obs) => match invert_at::<f64>(model, obs, row.day(), &mut ws) {
                     Ok(inv) => {
                         let _ = write_result(&mut s, &inv);
                     }
@@ -105,12 +112,22 @@ pub fn invert_rows(model: &Model<'_>, rows: &[ObsRow]) -> Vec<String> {
 }
 
 /// Observation rows as the plain lines the firmware reads (empty fields for missing channels;
-/// rows that already failed on the host are sent as a line the firmware rejects too).
-pub fn firmware_lines(rows: &[ObsRow]) -> String {
+/// rows that already failed on the host are sent as a line the firmware rejects too). With
+/// `with_date` (models with time-dependent effects) each line starts with the date `YYYY-MM-DD`.
+pub fn firmware_lines(rows: &[ObsRow], with_date: bool) -> String {
     let mut out = String::new();
     for row in rows {
         match &row.obs {
             Ok(obs) => {
+                if with_date {
+                    let d = row.day();
+                    if d.is_finite() {
+                        let (y, m, dd) = magic_core::time::civil_from_days(d as i64);
+                        out.push_str(&format!("{y:04}-{m:02}-{dd:02},"));
+                    } else {
+                        out.push_str("no-date,");
+                    }
+                }
                 let fields: Vec<String> = obs.iter().map(|v| if v.is_nan() { String::new() } else { format!("{v}") }).collect();
                 out.push_str(&fields.join(","));
             }

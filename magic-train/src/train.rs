@@ -6,7 +6,7 @@
 //! The paper used PyTorch's Adam with (coupled) L2 weight decay; candle offers AdamW (decoupled
 //! decay), which is what is used here.
 
-use crate::nets::{mse, smoothness, to_tensor, Net};
+use crate::nets::{days_tensor, mse, smoothness, to_tensor, Net};
 use anyhow::Result;
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -79,15 +79,26 @@ impl TrainLog {
     }
 }
 
+/// Rows of standardised observations with their day numbers.
+#[derive(Clone, Copy)]
+pub struct Rows<'a> {
+    /// Observations.
+    pub x: &'a [Vec<f32>],
+    /// Day numbers (NaN where unknown), one per row.
+    pub days: &'a [f64],
+}
+
 /// Validation MSE of the final reconstruction (standardised units).
-pub fn valid_mse(net: &Net, x: &[Vec<f32>]) -> Result<f64> {
+pub fn valid_mse(net: &Net, data: Rows<'_>) -> Result<f64> {
+    let x = data.x;
     let n = x.first().map_or(0, |r| r.len());
     let mut sum = 0.0;
     let mut count = 0usize;
-    for chunk in x.chunks(1024) {
+    for (ci, chunk) in x.chunks(1024).enumerate() {
         let rows: Vec<&[f32]> = chunk.iter().map(|r| r.as_slice()).collect();
         let t = to_tensor(&rows, n)?;
-        let out = net.forward(&t)?;
+        let d = days_tensor(&data.days[ci * 1024..ci * 1024 + chunk.len()])?;
+        let out = net.forward(&t, &d)?;
         let e = mse(&out.recon, &t)?.to_scalar::<f32>()? as f64;
         sum += e * chunk.len() as f64;
         count += chunk.len();
@@ -97,7 +108,8 @@ pub fn valid_mse(net: &Net, x: &[Vec<f32>]) -> Result<f64> {
 
 /// Trains `net` on `train` (rows of standardised observations, in time order when `seq_len > 1`),
 /// early-stopping on `valid`.
-pub fn train(net: &Net, train: &[Vec<f32>], valid: &[Vec<f32>], cfg: &TrainConfig, rng: &mut StdRng) -> Result<TrainLog> {
+pub fn train(net: &Net, train_rows: Rows<'_>, valid: Rows<'_>, cfg: &TrainConfig, rng: &mut StdRng) -> Result<TrainLog> {
+    let train = train_rows.x;
     let n = train.first().map_or(0, |r| r.len());
     let t = cfg.seq_len.max(1);
     let mut starts: Vec<usize> = (0..train.len() / t).map(|i| i * t).collect();
@@ -126,7 +138,8 @@ pub fn train(net: &Net, train: &[Vec<f32>], valid: &[Vec<f32>], cfg: &TrainConfi
         for group in starts.chunks(cfg.batch_seqs) {
             let rows: Vec<&[f32]> = group.iter().flat_map(|&s| train[s..s + t].iter().map(|r| r.as_slice())).collect();
             let x = to_tensor(&rows, n)?;
-            let out = net.forward(&x)?;
+            let days: Vec<f64> = group.iter().flat_map(|&s| train_rows.days[s..s + t].iter().copied()).collect();
+            let out = net.forward(&x, &days_tensor(&days)?)?;
             let mut loss = mse(&out.recon, &x)?;
             if let (Some(f), true) = (&out.physics, cfg.lambda > 0.0 && t > 1) {
                 let mut s = smoothness(f, group.len(), t)?;

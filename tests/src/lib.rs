@@ -32,7 +32,7 @@ pub fn random_mogi_model(variant: Variant, seed: u64) -> OwnedModel {
     let s = synth::generate(synth::Scenario::Clean, seed);
     let d = &s.data;
     let mut rng = StdRng::seed_from_u64(seed);
-    let phys: Arc<dyn Physics> = Arc::new(MogiPhysics { stations: d.stations.clone() });
+    let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(d.stations.clone()));
     let net = Net::new(
         variant,
         d.n_obs(),
@@ -44,5 +44,5 @@ pub fn random_mogi_model(variant: Variant, seed: u64) -> OwnedModel {
         &mut rng,
     )
     .expect("network");
-    OwnedModel::from_net(&net, mogi_problem(&d.names, &d.stations).expect("problem")).expect("model")
+    OwnedModel::from_net(&net, mogi_problem(&d.names, &d.stations).expect("problem"), vec![]).expect("model")
 }

@@ -16,6 +16,11 @@ pub struct Split {
     pub dates: Vec<String>,
 }
 
+/// Day number (days since 1970-01-01) of a date as written in the data files; NaN if malformed.
+pub fn day_number(date: &str) -> f64 {
+    magic_core::time::parse_date(date).map_or(f64::NAN, |d| d as f64)
+}
+
 impl Split {
     /// Number of days.
     pub fn len(&self) -> usize {
@@ -24,6 +29,10 @@ impl Split {
     /// Whether empty.
     pub fn is_empty(&self) -> bool {
         self.x.is_empty()
+    }
+    /// Day numbers of the rows (NaN where the date is missing or malformed).
+    pub fn days(&self) -> Vec<f64> {
+        self.dates.iter().map(|d| day_number(d)).collect()
     }
 }
 

@@ -1,0 +1,241 @@
+//! Declared extra physics: terms added to the forward model F when residual analysis traces a
+//! systematic error to a named effect (the loop of `magic loop`).
+//!
+//! Two kinds:
+//! * **latent** effects add variables the encoder infers for every observation, with their own
+//!   bounds (a daily network translation, a vertical term linear in station elevation, the volume
+//!   change of a second source at a found position);
+//! * **fitted** effects are constants found by the residual analysis and applied as a function of
+//!   the observation's date (per-channel annual and semiannual terms, a step at one station from an
+//!   epoch, per-channel drift).
+//!
+//! Every term is generic over [`Real`] so the trainer differentiates through it exactly and the
+//! board evaluates it in f32. Times are day numbers (days since 1970-01-01, see [`crate::time`]).
+
+use crate::mogi::{self, Station};
+use crate::quant::LeF32;
+use crate::{Error, Real};
+use serde::{Deserialize, Serialize};
+
+/// Largest number of effects in one model.
+pub const MAX_EFFECTS: usize = 4;
+
+const TWO_PI: f64 = core::f64::consts::TAU;
+const YEAR_DAYS: f64 = 365.25;
+
+/// One declared effect. Observation channels are uₑ ×S, uₙ ×S, uᵥ ×S (mm).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Effect<'a> {
+    /// Daily translation of the whole network: 3 latent variables (E, N, U in mm).
+    CommonMode,
+    /// Vertical displacement `k · (zᵢ − z_ref)`: 1 latent variable k (mm per km of elevation).
+    Elevation {
+        /// Reference elevation (km), the network mean.
+        z_ref_km: f32,
+    },
+    /// A second Mogi source at a fixed position: 1 latent variable, its volume change (10⁶ m³).
+    SecondSource {
+        /// East (km).
+        x_km: f32,
+        /// North (km).
+        y_km: f32,
+        /// Depth (km).
+        depth_km: f32,
+    },
+    /// Per-channel annual and semiannual terms: `coef` holds, per channel, the amplitudes of
+    /// sin(ωt), cos(ωt), sin(2ωt), cos(2ωt) with ω = 2π / 365.25 d (4 × channels f32).
+    Seasonal {
+        /// Coefficients (mm).
+        #[serde(borrow)]
+        coef: LeF32<'a>,
+    },
+    /// A step of `offset_mm` (E, N, U) at one station from `epoch_day` on.
+    Step {
+        /// Station index.
+        station: u16,
+        /// First day of the new position.
+        epoch_day: f32,
+        /// Offset (mm).
+        offset_mm: [f32; 3],
+    },
+    /// Per-channel linear drift `rate · (t − t0) / 365.25` (mm per year).
+    Drift {
+        /// Reference day.
+        t0_day: f32,
+        /// Rates (mm/yr), one per channel.
+        #[serde(borrow)]
+        rate: LeF32<'a>,
+    },
+}
+
+impl Effect<'_> {
+    /// Number of latent variables the encoder infers for this effect.
+    pub fn n_latent(&self) -> usize {
+        match self {
+            Effect::CommonMode => 3,
+            Effect::Elevation { .. } | Effect::SecondSource { .. } => 1,
+            _ => 0,
+        }
+    }
+
+    /// Whether the effect needs the observation's date.
+    pub fn needs_time(&self) -> bool {
+        matches!(self, Effect::Seasonal { .. } | Effect::Step { .. } | Effect::Drift { .. })
+    }
+
+    /// The family name used in reports.
+    pub fn family(&self) -> &'static str {
+        match self {
+            Effect::CommonMode => "common_mode",
+            Effect::Elevation { .. } => "elevation",
+            Effect::SecondSource { .. } => "second_source",
+            Effect::Seasonal { .. } => "seasonal",
+            Effect::Step { .. } => "step",
+            Effect::Drift { .. } => "drift",
+        }
+    }
+
+    /// Checks the effect against a network of `n_stations`.
+    pub fn validate(&self, n_stations: usize) -> Result<(), Error> {
+        let n_obs = 3 * n_stations;
+        let finite = |v: f32| v.is_finite();
+        match *self {
+            Effect::CommonMode => Ok(()),
+            Effect::Elevation { z_ref_km } if finite(z_ref_km) => Ok(()),
+            Effect::SecondSource { x_km, y_km, depth_km } if finite(x_km) && finite(y_km) && depth_km > 0.0 => Ok(()),
+            Effect::Seasonal { coef } if coef.0.len() == 16 * n_obs && coef.iter().all(finite) => Ok(()),
+            Effect::Step { station, epoch_day, offset_mm }
+                if (station as usize) < n_stations && finite(epoch_day) && offset_mm.iter().all(|v| v.is_finite()) =>
+            {
+                Ok(())
+            }
+            Effect::Drift { t0_day, rate } if finite(t0_day) && rate.0.len() == 4 * n_obs && rate.iter().all(finite) => {
+                Ok(())
+            }
+            _ => Err(Error::InvalidModel("effect parameters invalid or sized for another network")),
+        }
+    }
+
+    /// Adds the effect to `out` (uₑ ×S, uₙ ×S, uᵥ ×S in mm). `latent` holds this effect's latent
+    /// variables; `t_day` the date (needed by fitted effects).
+    pub fn apply<R: Real>(&self, stations: &[Station], latent: &[R], t_day: f64, out: &mut [R]) -> Result<(), Error> {
+        let s = stations.len();
+        if out.len() != 3 * s || latent.len() != self.n_latent() {
+            return Err(Error::SizeMismatch { what: "effect inputs", expected: 3 * s, found: out.len() });
+        }
+        if self.needs_time() && !t_day.is_finite() {
+            return Err(Error::OutOfRange { what: "date (the model has time-dependent effects)" });
+        }
+        match *self {
+            Effect::CommonMode => {
+                for k in 0..3 {
+                    for o in &mut out[k * s..(k + 1) * s] {
+                        *o += latent[k];
+                    }
+                }
+            }
+            Effect::Elevation { z_ref_km } => {
+                for (i, st) in stations.iter().enumerate() {
+                    out[2 * s + i] += latent[0] * R::c(st.z_km - z_ref_km as f64);
+                }
+            }
+            Effect::SecondSource { x_km, y_km, depth_km } => {
+                let p = [R::c(x_km as f64), R::c(y_km as f64), R::c(depth_km as f64), latent[0]];
+                for (i, st) in stations.iter().enumerate() {
+                    let u = mogi::displacement(st, &p);
+                    for k in 0..3 {
+                        out[k * s + i] += u[k];
+                    }
+                }
+            }
+            Effect::Seasonal { coef } => {
+                let w = TWO_PI * t_day / YEAR_DAYS;
+                let basis = [libm::sin(w), libm::cos(w), libm::sin(2.0 * w), libm::cos(2.0 * w)];
+                for (c, o) in out.iter_mut().enumerate() {
+                    let mut v = 0.0;
+                    for (j, b) in basis.iter().enumerate() {
+                        v += coef.get(4 * c + j) as f64 * b;
+                    }
+                    *o += R::c(v);
+                }
+            }
+            Effect::Step { station, epoch_day, offset_mm } => {
+                if t_day >= epoch_day as f64 {
+                    let i = station as usize;
+                    for k in 0..3 {
+                        out[k * s + i] += R::c(offset_mm[k] as f64);
+                    }
+                }
+            }
+            Effect::Drift { t0_day, rate } => {
+                let dt = (t_day - t0_day as f64) / YEAR_DAYS;
+                for (c, o) in out.iter_mut().enumerate() {
+                    *o += R::c(rate.get(c) as f64 * dt);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// F with effects: the Mogi field of `params[..4]` plus every effect, whose latent variables
+/// follow in `params[4..]` in the order of `effects`.
+pub fn mogi_with_effects<R: Real>(
+    stations: &[Station],
+    effects: &[Effect<'_>],
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+) -> Result<(), Error> {
+    let p: [R; mogi::N_PARAMS] = params
+        .get(..mogi::N_PARAMS)
+        .and_then(|s| s.try_into().ok())
+        .ok_or(Error::SizeMismatch { what: "mogi parameters", expected: mogi::N_PARAMS, found: params.len() })?;
+    mogi::field(stations, &p, out)?;
+    let mut k = mogi::N_PARAMS;
+    for e in effects {
+        let n = e.n_latent();
+        let lat = params.get(k..k + n).ok_or(Error::SizeMismatch {
+            what: "effect latent variables",
+            expected: k + n,
+            found: params.len(),
+        })?;
+        e.apply(stations, lat, t_day, out)?;
+        k += n;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Dual;
+
+    const NET: [Station; 2] = [Station { x_km: 1.0, y_km: 2.0, z_km: 0.3 }, Station { x_km: -3.0, y_km: 0.5, z_km: 0.6 }];
+
+    #[test]
+    fn latent_effects_are_linear_with_exact_derivatives() {
+        let effects = [Effect::CommonMode, Effect::Elevation { z_ref_km: 0.45 }];
+        let p: [Dual<8>; 8] = core::array::from_fn(|i| Dual::var([0.5, 0.1, 6.0, 1.0, 2.0, -1.0, 3.0, 10.0][i], i));
+        let mut out = [Dual::<8>::c(0.0); 6];
+        mogi_with_effects(&NET, &effects, &p, f64::NAN, &mut out).unwrap();
+        // ∂u_E(station 0)/∂t_E = 1, ∂u_U(station 1)/∂k = z − z_ref = 0.15
+        assert_eq!(out[0].d[4], 1.0);
+        assert!((out[5].d[7] - 0.15).abs() < 1e-6);
+    }
+
+    #[test]
+    fn time_effects_need_a_date() {
+        let rate = [0u8; 24];
+        let e = Effect::Drift { t0_day: 0.0, rate: LeF32(&rate) };
+        let mut out = [0.0f64; 6];
+        assert!(e.apply(&NET, &[], f64::NAN, &mut out).is_err());
+        assert!(e.apply(&NET, &[], 10.0, &mut out).is_ok());
+        let step = Effect::Step { station: 1, epoch_day: 100.0, offset_mm: [1.0, 2.0, 3.0] };
+        step.apply(&NET, &[], 99.0, &mut out).unwrap();
+        assert_eq!(out, [0.0; 6]);
+        step.apply(&NET, &[], 100.0, &mut out).unwrap();
+        assert_eq!(out, [0.0, 1.0, 0.0, 2.0, 0.0, 3.0]);
+        assert!(Effect::Step { station: 2, epoch_day: 0.0, offset_mm: [0.0; 3] }.validate(2).is_err());
+    }
+}
