@@ -49,10 +49,11 @@
 //! and the hotspot follows [`HotspotRule::Physical`]. Everything else (PROSPECT-D, 4SAIL, the
 //! direct/diffuse weighting, FLIM) is the same code in both modes.
 
-use super::prospect::{leaf_optics, CoefRow, Leaf, LeafOptics};
+use super::prospect::{leaf_optics_lanes, CoefRow, Leaf, LeafOptics};
 use super::sail::{
-    directional, extinction, layer, medium, mixed_reflectance, sail_parts, skyl, slab, sqrt0,
-    tan_distance, Extinction, HotspotRule, Layer, Lidf, SailOutput, SunView,
+    directional, extinction, layer, medium, mixed_reflectance, sail_view, skyl, slab, sqrt0,
+    tan_distance, Directional, Extinction, HotspotRule, Layer, Lidf, Medium, SailOutput, Slab,
+    SunView,
 };
 use crate::real::Real;
 use core::f64::consts::PI;
@@ -281,53 +282,68 @@ impl<R: Real> Scene<R> {
     /// INFORM at one wavelength, with every intermediate result.
     #[inline]
     pub fn wavelength(&self, row: &SpectralRow) -> WavelengthTerms<R> {
-        let leaf = leaf_optics(&row.coef, &self.leaf);
+        let [t] = self.wavelengths(&[*row]);
+        t
+    }
+
+    /// INFORM at `L` wavelengths at once (same results as `L` calls of [`Scene::wavelength`]).
+    ///
+    /// Every step runs for all lanes before the next, so the processor overlaps the `L`
+    /// independent dependency chains (see [`leaf_optics_lanes`]).
+    #[inline]
+    pub fn wavelengths<const L: usize>(&self, rows: &[SpectralRow; L]) -> [WavelengthTerms<R>; L] {
+        use core::array::from_fn;
+        let one = R::one();
+        let coefs: [CoefRow; L] = from_fn(|j| rows[j].coef);
+        let leaf: [LeafOptics<R>; L] = leaf_optics_lanes(&coefs, &self.leaf);
         // bf depends on the LIDF only, so one medium serves every 4SAIL call; the calls share
         // the sun/view terms (one or two geometries) and the diffuse terms of each LAI.
-        let md = medium(self.ext.bf, leaf);
-        let dir = directional(&self.ext, &md);
-        let soil = self.psoil * R::c(row.soil_dry) + (R::one() - self.psoil) * R::c(row.soil_wet);
-        let u = sail_parts(
-            &self.understory,
-            &md,
-            &dir,
-            &slab(&md, self.understory.lai),
-            soil,
-        );
-        let r_u = mixed_reflectance(u.rsot, u.rdot, self.skyl_s, row.es, row.ed);
-        let inf = sail_parts(
-            &self.crown_inf,
-            &md,
-            &dir,
-            &slab(&md, self.crown_inf.lai),
-            r_u,
-        );
-        let r_inf = mixed_reflectance(inf.rsot, inf.rdot, self.skyl_s, row.es, row.ed);
-        let crown_slab = slab(&md, self.crown_s.lai);
-        let (t_s, t_o) = match self.geometry {
+        let md: [Medium<R>; L] = from_fn(|j| medium(self.ext.bf, leaf[j]));
+        let dir: [Directional<R>; L] = from_fn(|j| directional(&self.ext, &md[j]));
+        let slab_u: [Slab<R>; L] = from_fn(|j| slab(&md[j], self.understory.lai));
+        let slab_inf: [Slab<R>; L] = from_fn(|j| slab(&md[j], self.crown_inf.lai));
+        let slab_c: [Slab<R>; L] = from_fn(|j| slab(&md[j], self.crown_s.lai));
+        let r_u: [R; L] = from_fn(|j| {
+            let row = &rows[j];
+            let soil = self.psoil * R::c(row.soil_dry) + (one - self.psoil) * R::c(row.soil_wet);
+            let u = sail_view(&self.understory, &md[j], &dir[j], &slab_u[j], soil);
+            mixed_reflectance(u.rsot, u.rdot, self.skyl_s, row.es, row.ed)
+        });
+        let r_inf: [R; L] = from_fn(|j| {
+            let inf = sail_view(&self.crown_inf, &md[j], &dir[j], &slab_inf[j], r_u[j]);
+            mixed_reflectance(inf.rsot, inf.rdot, self.skyl_s, rows[j].es, rows[j].ed)
+        });
+        let t_so: [(R, R); L] = match self.geometry {
             Geometry::Reference => {
-                let s = sail_parts(&self.crown_s, &md, &dir, &crown_slab, r_u);
-                let dir_o = directional(&self.ext_o, &md);
-                let o = sail_parts(&self.crown_o, &md, &dir_o, &crown_slab, r_u);
-                (
-                    mixed_reflectance(s.rsot, s.rdot, self.skyl_s, 1.0, 1.0),
-                    mixed_reflectance(o.rsot, o.rdot, self.skyl_o, 1.0, 1.0),
-                )
+                let dir_o: [Directional<R>; L] = from_fn(|j| directional(&self.ext_o, &md[j]));
+                let t_s: [R; L] = from_fn(|j| {
+                    let s = sail_view(&self.crown_s, &md[j], &dir[j], &slab_c[j], r_u[j]);
+                    mixed_reflectance(s.rsot, s.rdot, self.skyl_s, 1.0, 1.0)
+                });
+                from_fn(|j| {
+                    let o = sail_view(&self.crown_o, &md[j], &dir_o[j], &slab_c[j], r_u[j]);
+                    (
+                        t_s[j],
+                        mixed_reflectance(o.rsot, o.rdot, self.skyl_o, 1.0, 1.0),
+                    )
+                })
             }
-            Geometry::Physical => {
-                let c = sail_parts(&self.crown_s, &md, &dir, &crown_slab, r_u);
-                crown_transmittances(&c, r_u, self.skyl_s)
-            }
+            Geometry::Physical => from_fn(|j| {
+                let c = sail_view(&self.crown_s, &md[j], &dir[j], &slab_c[j], r_u[j]);
+                crown_transmittances(&c, r_u[j], self.skyl_s)
+            }),
         };
-        let r_forest = forest_reflectance(&self.crown, r_u, r_inf, t_s, t_o);
-        WavelengthTerms {
-            leaf,
-            r_understory: r_u,
-            r_crown_inf: r_inf,
-            t_s,
-            t_o,
-            r_forest,
-        }
+        from_fn(|j| {
+            let (t_s, t_o) = t_so[j];
+            WavelengthTerms {
+                leaf: leaf[j],
+                r_understory: r_u[j],
+                r_crown_inf: r_inf[j],
+                t_s,
+                t_o,
+                r_forest: forest_reflectance(&self.crown, r_u[j], r_inf[j], t_s, t_o),
+            }
+        })
     }
 }
 

