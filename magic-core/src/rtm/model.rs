@@ -459,3 +459,204 @@ pub fn inform_s2<R: Real>(
 ) -> Result<[R; N_BANDS], Error> {
     Inform::new(*tables)?.forward(x, geometry)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rtm::prospect::tav;
+
+    /// A synthetic 6-wavelength grid (not the published tables): visible-like, red-edge-like and
+    /// NIR-like absorption, two bands.
+    struct Synthetic {
+        cols: [[f64; 6]; 9],
+        soil: [[f64; 6]; 2],
+        sun: [[f64; 6]; 2],
+        beta: [f64; 26],
+        m: [f64; 12],
+    }
+
+    fn synthetic() -> Synthetic {
+        let nr = [1.5, 1.49, 1.48, 1.47, 1.46, 1.45];
+        let mut cols = [[0.0; 6]; 9];
+        for i in 0..6 {
+            cols[0][i] = nr[i];
+            cols[1][i] = [0.07, 0.05, 0.02, 0.001, 0.0, 0.0][i];
+            cols[2][i] = [0.15, 0.1, 0.0, 0.0, 0.0, 0.0][i];
+            cols[3][i] = [0.05, 0.02, 0.0, 0.0, 0.0, 0.0][i];
+            cols[4][i] = [0.5, 0.4, 0.3, 0.2, 0.1, 0.05][i];
+            cols[5][i] = [1e-4, 1e-4, 1e-3, 0.01, 0.1, 20.0][i];
+            cols[6][i] = [100.0, 80.0, 40.0, 10.0, 5.0, 20.0][i];
+            cols[7][i] = tav(40.0, nr[i]);
+            cols[8][i] = tav(90.0, nr[i]);
+        }
+        // Two beta rows: uniform-like and planophile-like (13 angles × 2, angle-major).
+        let mut beta = [0.0; 26];
+        for a in 0..13 {
+            beta[2 * a] = if a < 8 { 0.1111111 } else { 0.0222222 };
+            beta[2 * a + 1] = if a < 8 { (8 - a) as f64 / 36.0 } else { 0.0 };
+        }
+        // Band 0 averages wavelengths 0..=2, band 1 wavelengths 4..=5.
+        let m = [
+            1.0 / 3.0,
+            0.0,
+            1.0 / 3.0,
+            0.0,
+            1.0 / 3.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.5,
+            0.0,
+            0.5,
+        ];
+        Synthetic {
+            cols,
+            soil: [
+                [0.2, 0.22, 0.25, 0.3, 0.35, 0.3],
+                [0.05, 0.06, 0.08, 0.1, 0.12, 0.05],
+            ],
+            sun: [
+                [1.0, 1.1, 1.2, 1.0, 0.8, 0.3],
+                [2.0, 1.8, 1.0, 0.6, 0.3, 0.1],
+            ],
+            beta,
+            m,
+        }
+    }
+
+    fn tables(s: &Synthetic) -> Tables<'_> {
+        let c = &s.cols;
+        Tables {
+            prospect: Coefficients {
+                nr: &c[0],
+                k_cab: &c[1],
+                k_car: &c[2],
+                k_anth: &c[3],
+                k_brown: &c[4],
+                k_cw: &c[5],
+                k_cm: &c[6],
+                t12: &c[7],
+                tav90n: &c[8],
+            },
+            soil_dry: &s.soil[0],
+            soil_wet: &s.soil[1],
+            es: &s.sun[0],
+            ed: &s.sun[1],
+            lidf_beta: &s.beta,
+            resampling: &s.m,
+        }
+    }
+
+    fn inputs() -> [f64; N_INPUTS] {
+        let fixed = Fixed {
+            lidf: 1.0,
+            ..Fixed::default()
+        };
+        inputs_from_learned(&[1.6, 45.0, 0.012, 0.01, 2.5, 0.4, 0.6], &fixed)
+    }
+
+    #[test]
+    fn forward_agrees_with_spectrum_and_lanes() {
+        let s = synthetic();
+        // The synthetic matrix has 2 bands, the model expects 13.
+        assert!(matches!(
+            Inform::new(tables(&s)),
+            Err(Error::SizeMismatch { .. })
+        ));
+        // Rebuild with 13 bands: band 0 and 1 as above, the others empty.
+        let mut m = [0.0; 6 * N_BANDS];
+        for i in 0..6 {
+            m[i * N_BANDS] = s.m[i * 2];
+            m[i * N_BANDS + 1] = s.m[i * 2 + 1];
+        }
+        let t = Tables {
+            resampling: &m,
+            ..tables(&s)
+        };
+        let model = Inform::new(t).unwrap();
+        for geometry in [Geometry::Reference, Geometry::Physical] {
+            let y = model.forward(&inputs(), geometry).unwrap();
+            let mut spec = [0.0; 6];
+            model.spectrum(&inputs(), geometry, &mut spec).unwrap();
+            let want0 = (spec[0] + spec[1] + spec[2]) / 3.0;
+            let want1 = (spec[4] + spec[5]) / 2.0;
+            assert!((y[0] - want0).abs() < 1e-15 && (y[1] - want1).abs() < 1e-15);
+            assert!(y[2..].iter().all(|&v| v == 0.0));
+            assert!(spec.iter().all(|&r| r > 0.0 && r < 1.0), "{spec:?}");
+            // Lanes and single wavelengths give identical results.
+            let scene = model.scene(&inputs(), geometry).unwrap();
+            let rows = [0, 1, 2, 3].map(|i| model.row(i).unwrap());
+            let lanes = scene.wavelengths(&rows);
+            for (j, r) in rows.iter().enumerate() {
+                assert_eq!(lanes[j].r_forest, scene.wavelength(r).r_forest);
+            }
+            // f32 and dual values agree with f64.
+            let y32 = model
+                .forward(&inputs().map(|v| v as f32), geometry)
+                .unwrap();
+            assert!((y32[0] as f64 - y[0]).abs() < 1e-5);
+            let (yd, jac) = model
+                .jacobian(
+                    &[1.6, 45.0, 0.012, 0.01, 2.5, 0.4, 0.6],
+                    &Fixed {
+                        lidf: 1.0,
+                        ..Fixed::default()
+                    },
+                    geometry,
+                )
+                .unwrap();
+            assert!((yd[1] - y[1]).abs() < 1e-15);
+            assert!(jac.iter().flatten().all(|d| d.is_finite()));
+        }
+    }
+
+    #[test]
+    fn errors() {
+        let s = synthetic();
+        let mut m = [0.0; 6 * N_BANDS];
+        m[0] = 1.0;
+        let t = Tables {
+            resampling: &m,
+            ..tables(&s)
+        };
+        let model = Inform::new(t).unwrap();
+        let x = inputs();
+        let mut bad = x;
+        bad[20] = f64::NAN;
+        assert_eq!(
+            model.forward(&bad, Geometry::Reference),
+            Err(Error::NonFinite {
+                what: "inform input",
+                index: 20
+            })
+        );
+        let mut bad = x;
+        bad[11] = 2.0; // only rows 0 and 1 exist
+        assert!(matches!(
+            model.forward(&bad, Geometry::Reference),
+            Err(Error::OutOfRange { .. })
+        ));
+        assert!(model.wavelength(&x, Geometry::Reference, 6).is_err());
+        assert!(model
+            .spectrum(&x, Geometry::Reference, &mut [0.0; 5])
+            .is_err());
+        let short = Tables {
+            es: &s.sun[0][..5],
+            ..t
+        };
+        assert!(matches!(
+            Inform::new(short),
+            Err(Error::SizeMismatch {
+                what: "solar direct",
+                ..
+            })
+        ));
+        let empty = Tables {
+            lidf_beta: &[],
+            ..t
+        };
+        assert!(Inform::new(empty).is_err());
+        assert!(inform_s2(&t, &x, Geometry::Physical).is_ok());
+    }
+}
