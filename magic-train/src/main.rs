@@ -195,6 +195,9 @@ enum TrainProblem {
         /// Weight of the smoothness term (eq. 19).
         #[arg(long, default_value_t = 0.01)]
         lambda: f64,
+        /// Declared latent effects added to F, comma-separated: `common_mode`, `elevation`.
+        #[arg(long, value_delimiter = ',')]
+        effects: Vec<String>,
         /// How the smoothness term is reduced: `sum` (eq. 19 as printed) or `mean` (per element,
         /// the scale of the MSE term).
         #[arg(long, default_value = "mean")]
@@ -229,7 +232,7 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Train { problem: TrainProblem::Mogi { variant, data_dir, epochs, seed, lambda, smooth, out } } => {
+        Cmd::Train { problem: TrainProblem::Mogi { variant, data_dir, epochs, seed, lambda, effects, smooth, out } } => {
             let data = load_gnss(data_dir.as_deref())?;
             let smooth_mean = match smooth.as_str() {
                 "sum" => false,
@@ -237,7 +240,8 @@ fn run(cli: Cli) -> Result<()> {
                 other => bail!("--smooth {other}: expected `sum` or `mean`"),
             };
             let cfg = TrainConfig { epochs, lambda, smooth_mean, ..TrainConfig::gnss() };
-            let (model, log) = pipeline::train_mogi(&data, variant.into(), &cfg, seed)?;
+            let effects = effects.iter().map(|e| pipeline::latent_effect(e, &data)).collect::<Result<Vec<_>>>()?;
+            let (model, log) = pipeline::train_mogi_with(&data, variant.into(), &effects, &cfg, seed)?;
             std::fs::write(&out, model.encode()?).with_context(|| format!("{}: cannot write", out.display()))?;
             eprintln!(
                 "trained {:?}: {} epochs ({:.2} s/epoch, {:.1} s), best valid MSE {:.4} at epoch {} -> {}",

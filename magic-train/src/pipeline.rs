@@ -32,6 +32,18 @@ pub fn train_mogi(data: &GnssData, variant: Variant, cfg: &TrainConfig, seed: u6
     train_mogi_with(data, variant, &[], cfg, seed)
 }
 
+/// A latent effect by family name, for a network (`common_mode`, `elevation`).
+pub fn latent_effect(name: &str, data: &GnssData) -> Result<OwnedEffect> {
+    match name {
+        "common_mode" => Ok(OwnedEffect::CommonMode),
+        "elevation" => {
+            let z = data.stations.iter().map(|s| s.z_km).sum::<f64>() / data.stations.len().max(1) as f64;
+            Ok(OwnedEffect::Elevation { z_ref_km: z as f32 })
+        }
+        other => anyhow::bail!("unknown latent effect `{other}` (expected common_mode or elevation; fitted effects come from `magic loop`)"),
+    }
+}
+
 /// Latent-variable bounds of an effect.
 pub fn effect_bounds(e: &OwnedEffect) -> Vec<[f64; 2]> {
     match e {
