@@ -1,0 +1,201 @@
+//! Property tests of the core's promises: finite observations within ±10 m always invert to finite
+//! variables inside the model's bounds; decoding never panics; int8 arithmetic stays within ±127;
+//! the Mogi field is finite inside the paper's bounds.
+//!
+//! Tolerance: variables are checked against the bounds up to 1e-6 of the bound range (f32 rounding
+//! of `min + (max − min) · u` at u = 0 or 1), and exactly for the f64 path up to 1e-12.
+
+use magic_core::model_file::{Model, MAGIC, VERSION};
+use magic_core::mogi::{self, Station, PAPER_BOUNDS};
+use magic_core::quant::{quantize, requantize};
+use magic_core::{invert, Flags, Real, Variant, Workspace};
+use magic_tests::random_mogi_model;
+use magic_train::synth;
+use proptest::prelude::*;
+use std::sync::OnceLock;
+
+/// Decoded test models: int8 C, f32 C, f32 B (bytes leaked for the life of the test binary).
+fn models() -> &'static [Model<'static>] {
+    static M: OnceLock<Vec<Model<'static>>> = OnceLock::new();
+    M.get_or_init(|| {
+        let calib = synth::generate(synth::Scenario::Clean, 11).data.train.x[..200].to_vec();
+        let c = random_mogi_model(Variant::C, 11);
+        let files = [
+            c.quantize_int8(&calib).unwrap().encode().unwrap(),
+            c.encode().unwrap(),
+            random_mogi_model(Variant::B, 12).encode().unwrap(),
+        ];
+        files
+            .into_iter()
+            .map(|f| Model::decode(Box::leak(f.into_boxed_slice())).expect("valid model"))
+            .collect()
+    })
+}
+
+fn network() -> Vec<Station> {
+    synth::AKUTAN
+        .iter()
+        .map(|s| Station {
+            x_km: s.1,
+            y_km: s.2,
+            z_km: s.3,
+        })
+        .collect()
+}
+
+fn check_inversion<R: Real>(m: &Model<'_>, obs: &[f32], tol: f64) -> Result<(), TestCaseError> {
+    let inv = invert::<R>(m, obs, &mut Workspace::default())
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    prop_assert!(
+        inv.residual_rms.is_finite() && inv.residual_rms >= 0.0,
+        "residual {}",
+        inv.residual_rms
+    );
+    prop_assert!(inv.residual_rms_std.is_finite());
+    prop_assert_eq!(inv.n_params, 4);
+    for j in 0..inv.n_params {
+        let p = inv.params[j].value();
+        let [lo, hi] = m.bounds[j];
+        let slack = tol * (hi - lo) as f64;
+        prop_assert!(p.is_finite(), "param {} = {}", j, p);
+        prop_assert!(
+            p >= lo as f64 - slack && p <= hi as f64 + slack,
+            "param {} = {} outside [{}, {}]",
+            j,
+            p,
+            lo,
+            hi
+        );
+    }
+    for i in 0..inv.n_obs {
+        prop_assert!(inv.recon[i].value().is_finite());
+    }
+    let missing = obs.iter().any(|x| x.is_nan());
+    prop_assert_eq!(inv.flags.has(Flags::MISSING), missing);
+    Ok(())
+}
+
+proptest! {
+    #[test]
+    fn finite_observations_invert_inside_the_bounds(
+        obs in proptest::collection::vec(-1.0e4f32..=1.0e4, 36),
+        which in 0usize..3,
+    ) {
+        let m = &models()[which];
+        check_inversion::<f64>(m, &obs, 1e-12)?;
+        check_inversion::<f32>(m, &obs, 1e-6)?;
+    }
+
+    #[test]
+    fn missing_channels_invert_while_enough_remain(
+        obs in proptest::collection::vec(-200.0f32..=200.0, 36),
+        mask in proptest::collection::vec(any::<bool>(), 36),
+        which in 0usize..3,
+    ) {
+        let m = &models()[which];
+        let obs: Vec<f32> = obs.iter().zip(&mask).map(|(x, gone)| if *gone { f32::NAN } else { *x }).collect();
+        let observed = obs.iter().filter(|x| !x.is_nan()).count();
+        if observed >= 4 {
+            check_inversion::<f64>(m, &obs, 1e-12)?;
+        } else {
+            prop_assert!(invert::<f64>(m, &obs, &mut Workspace::default()).is_err());
+        }
+    }
+
+    #[test]
+    fn decoding_arbitrary_bytes_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..2048)) {
+        let _ = Model::decode(&bytes);
+    }
+
+    #[test]
+    fn decoding_sealed_arbitrary_bodies_never_panics(body in proptest::collection::vec(any::<u8>(), 0..2048)) {
+        // A valid header and CRC around arbitrary contents: the structural checks must answer.
+        let mut b = MAGIC.to_vec();
+        b.extend(VERSION.to_le_bytes());
+        b.extend((body.len() as u32).to_le_bytes());
+        b.extend(&body);
+        let crc = crc32(&b);
+        b.extend(crc.to_le_bytes());
+        let decoded = Model::decode(&b);
+        if let Ok(m) = &decoded {
+            let _ = invert::<f32>(m, &vec![0.0; m.n_obs()], &mut Workspace::default());
+        }
+    }
+
+    #[test]
+    fn requantize_stays_within_127(acc in any::<i32>(), m in any::<i32>(), shift in -30i8..=30) {
+        let q = requantize(acc, m, shift);
+        prop_assert!((-127..=127).contains(&q));
+        // The sign follows acc · m.
+        let prod = acc as i64 * m as i64;
+        prop_assert!(q == 0 || (q > 0) == (prod > 0), "acc {} m {} shift {} -> {}", acc, m, shift, q);
+    }
+
+    #[test]
+    fn requantize_matches_the_real_product(acc in -100_000i32..100_000, mult in 1.0e-6f64..1.0e3) {
+        let (m, s) = magic_core::quant::quantize_multiplier(mult).unwrap();
+        let want = (acc as f64 * mult).clamp(-127.0, 127.0);
+        let got = requantize(acc, m, s) as f64;
+        // Rounding (0.5) plus the multiplier's relative error (2^-30) on |acc · mult|.
+        prop_assert!((got - want).abs() <= 0.5 + 1e-9 * (acc as f64 * mult).abs() + 1e-9, "{} vs {}", got, want);
+    }
+
+    #[test]
+    fn quantize_stays_within_127(x in any::<f32>(), inv_s in any::<f32>()) {
+        let q = quantize(x, inv_s);
+        prop_assert!((-127..=127).contains(&q));
+    }
+
+    #[test]
+    fn quantize_with_special_values_stays_within_127(
+        x in prop_oneof![Just(f32::NAN), Just(f32::INFINITY), Just(f32::NEG_INFINITY), Just(f32::MAX), Just(f32::MIN), Just(1e-45f32), any::<f32>()],
+        inv_s in prop_oneof![Just(f32::NAN), Just(f32::INFINITY), Just(0.0f32), Just(-0.0f32), Just(f32::MAX), any::<f32>()],
+    ) {
+        let q = quantize(x, inv_s);
+        prop_assert!((-127..=127).contains(&q));
+    }
+
+    #[test]
+    fn mogi_field_is_finite_inside_the_paper_bounds(
+        x in PAPER_BOUNDS[0][0]..=PAPER_BOUNDS[0][1],
+        y in PAPER_BOUNDS[1][0]..=PAPER_BOUNDS[1][1],
+        d in PAPER_BOUNDS[2][0]..=PAPER_BOUNDS[2][1],
+        dv in PAPER_BOUNDS[3][0]..=PAPER_BOUNDS[3][1],
+    ) {
+        let st = network();
+        let mut u = vec![0f64; 36];
+        mogi::field(&st, &[x, y, d, dv], &mut u).unwrap();
+        prop_assert!(u.iter().all(|v| v.is_finite()));
+        // Up is positive under inflation, negative under deflation (the source is below every station).
+        for v in &u[24..] {
+            prop_assert!(dv == 0.0 || (*v > 0.0) == (dv > 0.0) || *v == 0.0);
+        }
+        let mut u32 = vec![0f32; 36];
+        mogi::field(&st, &[x as f32, y as f32, d as f32, dv as f32], &mut u32).unwrap();
+        prop_assert!(u32.iter().all(|v| v.is_finite()));
+        let mut jac = vec![[0f64; 4]; 36];
+        mogi::field_jacobian(&st, &[x, y, d, dv], &mut u, &mut jac).unwrap();
+        prop_assert!(jac.iter().flatten().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn mogi_rejects_a_source_at_or_above_the_surface(d in -100.0f64..=0.0) {
+        let mut u = vec![0f64; 36];
+        prop_assert!(mogi::field(&network(), &[0.0, 0.0, d, 1.0], &mut u).is_err());
+    }
+}
+
+fn crc32(data: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &byte in data {
+        c ^= byte as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
