@@ -6,7 +6,9 @@
 //! stay in int8 between layers (integer requantisation); an int8 layer followed by an f32 layer,
 //! or the last layer, dequantises to f32.
 
-use crate::quant::{dot_i8, quantize, requantize, LeF32, LeI32};
+#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+use crate::quant::dot_i8;
+use crate::quant::{quantize, requantize, LeF32, LeI32};
 use crate::Error;
 use serde::{Deserialize, Serialize};
 
@@ -164,16 +166,24 @@ pub fn validate_chain(layers: &[Layer<'_>], input: usize, output: usize) -> Resu
     Ok(())
 }
 
-/// Working memory for [`run`]: two f32 and two int8 buffers of [`MAX_WIDTH`].
+/// Working memory for [`run`]: two f32 and two int8 buffers of [`MAX_WIDTH`] (and, with the
+/// `dsp` feature on ARM, the int8 activations packed in pairs for the `SMLAD` kernel).
 #[derive(Clone, Debug)]
 pub struct Scratch {
     f: [[f32; MAX_WIDTH]; 2],
     q: [[i8; MAX_WIDTH]; 2],
+    #[cfg(all(feature = "dsp", target_arch = "arm"))]
+    xp: [u32; crate::quant::packed_words(MAX_WIDTH)],
 }
 
 impl Default for Scratch {
     fn default() -> Self {
-        Scratch { f: [[0.0; MAX_WIDTH]; 2], q: [[0; MAX_WIDTH]; 2] }
+        Scratch {
+            f: [[0.0; MAX_WIDTH]; 2],
+            q: [[0; MAX_WIDTH]; 2],
+            #[cfg(all(feature = "dsp", target_arch = "arm"))]
+            xp: [0; crate::quant::packed_words(MAX_WIDTH)],
+        }
     }
 }
 
@@ -245,9 +255,15 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
                         s.q[cur][c] = quantize(s.f[cur][c], inv);
                     }
                 }
+                #[cfg(all(feature = "dsp", target_arch = "arm"))]
+                crate::quant::pack_i8_pairs(&s.q[cur][..cols], &mut s.xp);
                 for r in 0..rows {
                     let row = &w[r * cols..(r + 1) * cols];
-                    let acc = dot_i8(row, &s.q[cur][..cols]).saturating_add(bias.get(r));
+                    #[cfg(all(feature = "dsp", target_arch = "arm"))]
+                    let dot = crate::quant::dot_i8_packed(row, &s.xp);
+                    #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
+                    let dot = dot_i8(row, &s.q[cur][..cols]);
+                    let acc = dot.saturating_add(bias.get(r));
                     if next_int8 {
                         let sh = shift[r] as i8;
                         let mut q = requantize(acc, mult.get(r), sh);
