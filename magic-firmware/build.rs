@@ -1,0 +1,68 @@
+//! Build script of the firmware.
+//!
+//! For the bare-metal target (`target_os = "none"`) it
+//! * puts `memory.x` (and an empty `device.x`) on the linker search path and links with
+//!   cortex-m-rt's `link.x`;
+//! * embeds the model file named by the environment variable `MAGIC_MODEL` (copied into `OUT_DIR`
+//!   as `model.magic`, read by `include_bytes!`). A relative path is taken from the workspace root.
+//!   Without `MAGIC_MODEL` the build fails with a message saying how to set it.
+//!
+//! For the host it does nothing: there the crate is a stub (`fn main() {}`).
+
+use std::env;
+use std::fs;
+use std::path::PathBuf;
+use std::process::exit;
+
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-env-changed=MAGIC_MODEL");
+    if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
+        return;
+    }
+    let manifest =
+        PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
+
+    println!("cargo:rerun-if-changed=memory.x");
+    if let Err(e) = fs::copy(manifest.join("memory.x"), out.join("memory.x")) {
+        fail(&format!("cannot copy memory.x into OUT_DIR: {e}"));
+    }
+    // cortex-m-rt's `device` feature includes `device.x` (interrupt handler names of a device
+    // crate); the firmware has none (its one-entry interrupt table is in `src/rt.rs`).
+    if let Err(e) = fs::write(out.join("device.x"), "/* no device interrupts */\n") {
+        fail(&format!("cannot write device.x into OUT_DIR: {e}"));
+    }
+    println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rustc-link-arg=-Tlink.x");
+
+    let Some(model) = env::var_os("MAGIC_MODEL") else {
+        fail(
+            "MAGIC_MODEL is not set. The firmware embeds a model file: build it with\n  \
+             MAGIC_MODEL=path/to/model.magic cargo build -p magic-firmware --target thumbv7em-none-eabihf --profile mcu\n\
+             (make a model with `magic export`; a relative path is taken from the workspace root).",
+        );
+    };
+    let mut path = PathBuf::from(&model);
+    if path.is_relative() {
+        path = manifest.join("..").join(path);
+    }
+    println!("cargo:rerun-if-changed={}", path.display());
+    match fs::read(&path) {
+        Ok(bytes) => {
+            if let Err(e) = fs::write(out.join("model.magic"), &bytes) {
+                fail(&format!("cannot write the model into OUT_DIR: {e}"));
+            }
+        }
+        Err(e) => fail(&format!(
+            "MAGIC_MODEL={}: cannot read {}: {e}",
+            model.to_string_lossy(),
+            path.display()
+        )),
+    }
+}
+
+fn fail(msg: &str) -> ! {
+    eprintln!("error: magic-firmware: {msg}");
+    exit(1);
+}

@@ -1,0 +1,284 @@
+//! The program: decode the embedded model, check the int8 kernel, stream lines through the
+//! inversion, print the cost figures.
+
+use crate::cost::{self, Clock, Stat};
+use crate::io::{Line, Out, Stdin, LINE_MAX};
+use crate::text::{parse_record_bytes, write_result};
+use core::fmt::Write;
+use magic_core::invert::{forward, invert_at, model_encoder, Workspace};
+use magic_core::line::{write_error, LineError};
+use magic_core::model_file::{Model, Variant, MAX_OBS, MAX_PARAMS};
+use magic_core::nn::{self, Layer, Weights};
+use magic_core::quant;
+use magic_core::Flags;
+
+/// The model file named by `MAGIC_MODEL` at build time (see `build.rs`).
+static MODEL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/model.magic"));
+
+/// Times each part of the inversion is repeated on the last valid observation for the split.
+const SPLIT_REPEAT: u32 = 32;
+
+/// Runs the firmware; `true` for success (exit 0).
+///
+/// The large state (model, working memory, input buffer: about 6.5 KB) lives in statics, each
+/// created in its own short-lived function, so that the stack holds only what one inversion needs.
+pub fn run() -> bool {
+    let mut out = Out::new();
+    let (Some(cp), Some(ws), Some(stdin)) = (cortex_m::Peripherals::take(), workspace(), stdin())
+    else {
+        let _ = out.write_str("error,start-up: state already taken");
+        out.end_line();
+        return false;
+    };
+    let clock = Clock::start(cp.SYST);
+    let model = match load_model() {
+        Some(Ok(m)) => m,
+        Some(Err(e)) => {
+            let _ = write!(out, "error,model: {e}");
+            out.end_line();
+            return false;
+        }
+        None => return false,
+    };
+    if let Err(what) = self_check(model) {
+        let _ = write!(out, "error,self-check: {what}");
+        out.end_line();
+        return false;
+    }
+
+    let n_obs = model.n_obs();
+    // Models with time-dependent effects read a leading date on every line.
+    let with_date = model.needs_time();
+    let mut obs = [0f32; MAX_OBS];
+    let mut last_valid = [0f32; MAX_OBS];
+    let mut last_day = f64::NAN;
+    let mut have_valid = false;
+    let mut total = Stat::default();
+    let mut missing = Stat::default();
+    let mut parse = Stat::default();
+    let mut lines = 0u32;
+    let mut errors = 0u32;
+    while let Some(line) = stdin.next_line() {
+        lines += 1;
+        let Line::Text(text) = line else {
+            errors += 1;
+            let _ = write!(out, "error,line longer than {LINE_MAX} bytes");
+            out.end_line();
+            continue;
+        };
+        let t0 = clock.now();
+        let parsed = parse_record_bytes(text, with_date, &mut obs[..n_obs]);
+        parse.add(clock.since(t0));
+        let result = parsed.and_then(|day| {
+            let t = clock.now();
+            let r = invert_at::<f32>(model, &obs[..n_obs], day, ws);
+            let dt = clock.since(t);
+            r.map(|inv| (inv, dt, day)).map_err(LineError::Invert)
+        });
+        match result {
+            Ok((inv, dt, day)) => {
+                if inv.flags.has(Flags::MISSING) {
+                    missing.add(dt);
+                } else {
+                    total.add(dt);
+                    last_valid = obs;
+                    last_day = day;
+                    have_valid = true;
+                }
+                let _ = write_result(&mut out, &inv);
+            }
+            Err(e) => {
+                errors += 1;
+                let _ = write_error(&mut out, &e);
+            }
+        }
+        out.end_line();
+    }
+
+    // The stack high-water mark of the streaming path, before the split measurement below.
+    let mem = cost::memory();
+    let calib = clock.calibrate(10_000);
+    let split = if have_valid {
+        measure_split(model, &last_valid[..n_obs], last_day, ws, &clock)
+    } else {
+        None
+    };
+    let after = cost::memory();
+
+    let _ = out.write_str("# magic-firmware cost: instructions counted by QEMU -icount shift=0 through SysTick (40 per tick)");
+    out.end_line();
+    kv(&mut out, "lines", lines);
+    kv(&mut out, "errors", errors);
+    kv(&mut out, "inversions", total.n + missing.n);
+    kv(&mut out, "inversions_complete", total.n);
+    kv(&mut out, "instructions_per_inversion", total.mean());
+    kv(&mut out, "instructions_per_inversion_min", total.min);
+    kv(&mut out, "instructions_per_inversion_max", total.max);
+    kv(&mut out, "inversions_with_missing", missing.n);
+    kv(
+        &mut out,
+        "instructions_per_inversion_with_missing",
+        missing.mean(),
+    );
+    kv(&mut out, "instructions_parse_line", parse.mean());
+    if let Some(s) = split {
+        kv(&mut out, "instructions_encoder", s.encoder);
+        kv(&mut out, "instructions_mogi", s.mogi);
+        kv(&mut out, "instructions_correction", s.correction);
+    }
+    kv(&mut out, "clock_calibration_permille", calib);
+    if !(990..=1010).contains(&calib) {
+        let _ = out.write_str("# warning=SysTick does not follow the instruction count (run QEMU with -icount shift=0): instruction figures are not valid");
+        out.end_line();
+    }
+    kv(&mut out, "stack_bytes", mem.stack_used as u32);
+    kv(
+        &mut out,
+        "stack_bytes_with_split_measurement",
+        after.stack_used as u32,
+    );
+    kv(&mut out, "stack_available_bytes", mem.stack_size as u32);
+    kv(&mut out, "statics_bytes", mem.statics as u32);
+    kv(&mut out, "flash_bytes", mem.flash_used as u32);
+    kv(&mut out, "model_bytes", MODEL.len() as u32);
+    if after.stack_used >= after.stack_size {
+        let _ = out.write_str("# error=stack overflow: the whole stack region was used");
+        out.end_line();
+        return false;
+    }
+    true
+}
+
+/// The inversion's working memory, in a static.
+#[inline(never)]
+fn workspace() -> Option<&'static mut Workspace> {
+    cortex_m::singleton!(: Workspace = Workspace::default())
+}
+
+/// The input reader and its line buffer, in a static.
+#[inline(never)]
+fn stdin() -> Option<&'static mut Stdin> {
+    cortex_m::singleton!(: Stdin = Stdin::open())
+}
+
+/// Decodes the embedded model into a static. Decoding needs several kilobytes of temporaries;
+/// they live only in this function's frame.
+#[inline(never)]
+fn load_model() -> Option<Result<&'static Model<'static>, magic_core::Error>> {
+    let slot: &'static mut Option<Model<'static>> =
+        cortex_m::singleton!(: Option<Model<'static>> = None)?;
+    match Model::decode(MODEL) {
+        Ok(m) => Some(Ok(slot.insert(m))),
+        Err(e) => Some(Err(e)),
+    }
+}
+
+/// Writes a report line `# key=value` (one non-generic call per figure keeps the report small).
+#[inline(never)]
+fn kv(out: &mut Out, key: &str, v: u32) {
+    let _ = out.write_str("# ");
+    let _ = out.write_str(key);
+    let _ = write!(out, "={v}");
+    out.end_line();
+}
+
+/// Instructions of the parts of one inversion.
+struct Split {
+    encoder: u32,
+    mogi: u32,
+    correction: u32,
+}
+
+/// Times the encoder, the forward model and the correction separately on one observation, each
+/// [`SPLIT_REPEAT`] times, with the calls [`invert_at`] makes (the correction runs through
+/// `model_encoder` on a copy of the model whose encoder is the correction, so that it uses the
+/// same working memory).
+#[inline(never)]
+fn measure_split(
+    model: &Model<'_>,
+    obs: &[f32],
+    day: f64,
+    ws: &mut Workspace,
+    clock: &Clock,
+) -> Option<Split> {
+    let n_obs = obs.len();
+    let n_params = model.n_params();
+    let mut z = [0f32; MAX_OBS];
+    for (i, &x) in obs.iter().enumerate() {
+        if !x.is_nan() {
+            z[i] = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
+        }
+    }
+    let mut unit = [0f32; MAX_PARAMS];
+    let mut params = [0f32; MAX_PARAMS];
+    let mut physics = [0f32; MAX_OBS];
+    let mut y = [0f32; MAX_OBS];
+    let (mut enc, mut mogi, mut corr) = (Stat::default(), Stat::default(), Stat::default());
+    let mut correction = model.clone();
+    correction.encoder = model.decoder.clone();
+    for _ in 0..SPLIT_REPEAT {
+        let t = clock.now();
+        model_encoder(model, &z[..n_obs], &mut unit[..n_params], ws).ok()?;
+        enc.add(clock.since(t));
+        if model.variant == Variant::A {
+            continue;
+        }
+        for i in 0..n_params {
+            let [lo, hi] = model.bounds[i];
+            params[i] = lo + (hi - lo) * unit[i];
+        }
+        let t = clock.now();
+        forward::<f32>(model, &params[..n_params], day, &mut physics[..n_obs]).ok()?;
+        mogi.add(clock.since(t));
+        if model.variant == Variant::C {
+            for (i, v) in physics[..n_obs].iter_mut().enumerate() {
+                *v = (*v - model.obs_mean.get(i)) / model.obs_scale.get(i);
+            }
+            let t = clock.now();
+            model_encoder(&correction, &physics[..n_obs], &mut y[..n_obs], ws).ok()?;
+            corr.add(clock.since(t));
+        }
+    }
+    Some(Split {
+        encoder: enc.mean(),
+        mogi: mogi.mean(),
+        correction: corr.mean(),
+    })
+}
+
+/// Checks the int8 dot-product kernel this build uses against the portable one on every row of
+/// every int8 layer of the model, with deterministic pseudo-random activations.
+fn self_check(model: &Model<'_>) -> Result<(), &'static str> {
+    let mut seed = 0x2545_F491u32;
+    for layer in model.encoder.iter().chain(model.decoder.iter()) {
+        check_layer(layer, &mut seed)?;
+    }
+    Ok(())
+}
+
+fn check_layer(layer: &Layer<'_>, seed: &mut u32) -> Result<(), &'static str> {
+    let Weights::Int8 { w, .. } = layer.weights else {
+        return Ok(());
+    };
+    let (rows, cols) = (layer.rows as usize, layer.cols as usize);
+    let mut x = [0i8; nn::MAX_WIDTH];
+    let mut xp = [0u32; quant::packed_words(nn::MAX_WIDTH)];
+    for v in x[..cols].iter_mut() {
+        *seed ^= *seed << 13;
+        *seed ^= *seed >> 17;
+        *seed ^= *seed << 5;
+        *v = ((*seed >> 24) as u8 as i8).max(-127);
+    }
+    quant::pack_i8_pairs(&x[..cols], &mut xp);
+    for r in 0..rows {
+        let row = w
+            .get(r * cols..(r + 1) * cols)
+            .ok_or("layer shorter than rows x cols")?;
+        let portable = quant::dot_i8(row, &x[..cols]);
+        let fast = quant::dot_i8_packed(row, &xp);
+        if portable != fast {
+            return Err("the DSP int8 dot product differs from the portable one");
+        }
+    }
+    Ok(())
+}
