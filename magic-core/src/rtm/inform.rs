@@ -292,10 +292,21 @@ impl<R: Real> Scene<R> {
     /// independent dependency chains (see [`leaf_optics_lanes`]).
     #[inline]
     pub fn wavelengths<const L: usize>(&self, rows: &[SpectralRow; L]) -> [WavelengthTerms<R>; L] {
+        let coefs: [CoefRow; L] = core::array::from_fn(|j| rows[j].coef);
+        let leaf: [LeafOptics<R>; L] = leaf_optics_lanes(&coefs, &self.leaf);
+        self.wavelengths_with_leaf(rows, &leaf)
+    }
+
+    /// [`Scene::wavelengths`] with the leaf optics given instead of computed from the scene's
+    /// leaf parameters (used to split the Jacobian into a leaf part and a canopy part).
+    #[inline]
+    pub fn wavelengths_with_leaf<const L: usize>(
+        &self,
+        rows: &[SpectralRow; L],
+        leaf: &[LeafOptics<R>; L],
+    ) -> [WavelengthTerms<R>; L] {
         use core::array::from_fn;
         let one = R::one();
-        let coefs: [CoefRow; L] = from_fn(|j| rows[j].coef);
-        let leaf: [LeafOptics<R>; L] = leaf_optics_lanes(&coefs, &self.leaf);
         // bf depends on the LIDF only, so one medium serves every 4SAIL call; the calls share
         // the sun/view terms (one or two geometries) and the diffuse terms of each LAI.
         let md: [Medium<R>; L] = from_fn(|j| medium(self.ext.bf, leaf[j]));
