@@ -661,10 +661,9 @@ mod tests {
             // The split chain rule equals plain Dual<7> forward mode.
             let z7: [Dual<N_LEARNED>; N_LEARNED] = core::array::from_fn(|i| Dual::var(z[i], i));
             let full = model.forward_learned(&z7, &fixed, geometry).unwrap();
-            for b in 0..2 {
-                for i in 0..N_LEARNED {
-                    let (a, e) = (jac[b][i], full[b].d[i]);
-                    assert!((a - e).abs() <= 1e-12 * (1.0 + e.abs()), "{b} {i}: {a} {e}");
+            for (row, f) in jac.iter().zip(full.iter()).take(2) {
+                for (&a, &e) in row.iter().zip(f.d.iter()) {
+                    assert!((a - e).abs() <= 1e-12 * (1.0 + e.abs()), "{a} {e}");
                 }
             }
         }
