@@ -8,12 +8,14 @@ pub mod demo;
 pub mod demo_qemu;
 pub mod eval;
 pub mod export;
+pub mod missing;
 pub mod nets;
 pub mod physics;
 pub mod records;
 pub mod reproduce;
 pub mod synth;
 pub mod pipeline;
+pub mod qemu;
 pub mod train;
 
 pub use data::gnss::GnssData;

@@ -120,6 +120,24 @@ enum Cmd {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Inversion with stations down: 1, 2, 4 random stations and the two nearest the source.
+    Missing {
+        /// Model file.
+        #[arg(long)]
+        model: PathBuf,
+        /// Data folder.
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Split.
+        #[arg(long, default_value = "test")]
+        split: String,
+        /// Seed for the random removals.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Write the figures as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// The main job: train C and B, evaluate, export int8, run the test days on the firmware.
     Demo {
         /// Data folder laid out like `shared/data/gnss` (default: $MAGIC_DATA/gnss, ../shared/data/gnss,
@@ -313,6 +331,16 @@ fn run(cli: Cli) -> Result<()> {
             let v = magic_train::reproduce::table4(&data, &seeds, &cfg)?;
             if let Some(p) = json {
                 std::fs::write(&p, serde_json::to_string_pretty(&v)?).with_context(|| format!("{}: cannot write", p.display()))?;
+            }
+        }
+        Cmd::Missing { model, data_dir, split, seed, json } => {
+            let data = load_gnss(data_dir.as_deref())?;
+            let bytes = read_model(&model)?;
+            let m = decode(&model, &bytes)?;
+            let rows = magic_train::missing::evaluate_missing(&m, &data, &split, seed)?;
+            magic_train::missing::print_table(&rows);
+            if let Some(p) = json {
+                std::fs::write(&p, serde_json::to_string_pretty(&rows)?).with_context(|| format!("{}: cannot write", p.display()))?;
             }
         }
         Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
