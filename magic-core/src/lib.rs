@@ -13,6 +13,7 @@
 //! * [`quant`] and [`nn`] — int8 / f32 dense layers and the MLPs built from them;
 //! * [`model_file`] — the exported model, decoded without allocation;
 //! * [`invert`] — observations to variables, reconstruction, residual and quality flags.
+//! * [`lsq`] — the classical baseline: per-day Levenberg–Marquardt fits with the exact Jacobian.
 #![no_std]
 #![deny(missing_docs)]
 // `unsafe` is denied everywhere except the Armv7E-M int8 kernel (`quant::dsp`, feature `dsp`,
@@ -30,6 +31,7 @@ pub use error::Error;
 pub use real::{Dual, Real};
 pub mod invert;
 pub mod line;
+pub mod lsq;
 pub mod model_file;
 pub mod nn;
 pub mod quant;
