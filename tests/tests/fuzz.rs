@@ -183,7 +183,7 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
                 let secs = start.elapsed().as_secs_f64();
                 let n = if only.is_some() { 1 } else { n };
                 eprintln!(
-                    "fuzz {name}: {n} cases in {secs:.2} s ({:.0} cases/s, slowest case {:.2} ms), seed {:#x}: no panic, no hang",
+                    "fuzz {name}: {n} cases in {secs:.2} s ({:.0} cases/s, slowest case {:.2} ms), MAGIC_FUZZ_SEED={}: no panic, no hang",
                     n as f64 / secs.max(1e-9),
                     slowest * 1e3,
                     seed()
