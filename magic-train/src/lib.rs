@@ -3,6 +3,7 @@
 //! The host side of **magic**: data readers, the paper's models in candle with the core's physics
 //! as a differentiable op, training, int8 export, evaluation and the `magic` command line.
 
+pub mod classical;
 pub mod data;
 pub mod demo;
 pub mod demo_qemu;

@@ -138,6 +138,24 @@ enum Cmd {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// The classical baseline: a least-squares fit of the Mogi source for every day (no encoder).
+    Classical {
+        /// Data folder.
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Splits, comma-separated (train, valid, test).
+        #[arg(long, default_value = "test", value_delimiter = ',')]
+        split: Vec<String>,
+        /// Latent effects fitted with the source, comma-separated (common_mode, elevation).
+        #[arg(long, value_delimiter = ',')]
+        effects: Vec<String>,
+        /// Write the summaries as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Write the per-day fits as CSV here.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
     /// The main job: train C and B, evaluate, export int8, run the test days on the firmware.
     Demo {
         /// Data folder laid out like `shared/data/gnss` (default: $MAGIC_DATA/gnss, ../shared/data/gnss,
@@ -342,6 +360,10 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(p) = json {
                 std::fs::write(&p, serde_json::to_string_pretty(&rows)?).with_context(|| format!("{}: cannot write", p.display()))?;
             }
+        }
+        Cmd::Classical { data_dir, split, effects, json, csv } => {
+            let data = load_gnss(data_dir.as_deref())?;
+            magic_train::classical::run(&data, &split, &effects, json.as_deref(), csv.as_deref())?;
         }
         Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
             demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
