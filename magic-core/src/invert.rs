@@ -11,7 +11,13 @@
 use crate::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
 use crate::nn::{run, Scratch};
 use crate::effects::mogi_with_effects;
+use crate::rtm::inform::crown_from_cover;
+use crate::rtm::N_LEARNED;
 use crate::{Error, Real};
+
+/// Derived variables an RTM inversion reports after the 7 learned ones: crown diameter `cd` (m)
+/// and tree height `h` (m), paper eqs. 7–8.
+pub const N_DERIVED_RTM: usize = 2;
 
 /// Largest absolute observation accepted, in the model's physical unit (mm for GNSS: 10 m).
 pub const MAX_ABS_OBS: f64 = 1.0e4;
@@ -37,9 +43,11 @@ impl Flags {
 /// The result of one inversion.
 #[derive(Clone, Debug)]
 pub struct Inversion<R> {
-    /// Number of valid entries in `params`.
+    /// Number of valid entries in `params`: the encoder's variables, then derived ones (RTM
+    /// variants B and C: crown diameter `cd` and tree height `h`, from `fc`; see
+    /// [`N_DERIVED_RTM`]).
     pub n_params: usize,
-    /// Physical variables (for variant A: the latent code).
+    /// Physical variables (for variant A: the latent code), then derived variables.
     pub params: [R; MAX_PARAMS],
     /// The encoder's normalised outputs in [0, 1] (variants B, C).
     pub unit: [f32; MAX_PARAMS],
@@ -112,7 +120,7 @@ pub fn invert_at<R: Real>(model: &Model<'_>, obs: &[f32], t_day: f64, ws: &mut W
     }
     let groups = match &model.problem {
         Problem::Mogi { stations, .. } => stations.len(),
-        Problem::Rtm => n_obs,
+        Problem::Rtm { .. } => n_obs,
     };
     let per_group = n_obs / groups.max(1);
     let mut used = 0u32;
@@ -135,7 +143,14 @@ pub fn invert_at<R: Real>(model: &Model<'_>, obs: &[f32], t_day: f64, ws: &mut W
             pass = Pass::run(model, &z[..n_obs], t_day, ws)?;
         }
     }
-    let Pass { params, unit, physics, recon, at_bound } = pass;
+    let Pass { mut params, unit, physics, recon, at_bound } = pass;
+    let mut n_params = n_params;
+    if let (Problem::Rtm { fixed, .. }, Variant::B | Variant::C) = (&model.problem, model.variant) {
+        let (cd, h) = crown_from_cover(params[6], R::c(fixed.sd));
+        params[n_params] = cd;
+        params[n_params + 1] = h;
+        n_params += N_DERIVED_RTM;
+    }
     if at_bound {
         flags.0 |= Flags::AT_BOUND;
     }
@@ -236,7 +251,17 @@ pub fn model_encoder(model: &Model<'_>, z: &[f32], out: &mut [f32], ws: &mut Wor
 pub fn forward<R: Real>(model: &Model<'_>, params: &[R], t_day: f64, out: &mut [R]) -> Result<(), Error> {
     match &model.problem {
         Problem::Mogi { stations, .. } => mogi_with_effects(stations, &model.effects, params, t_day, out),
-        Problem::Rtm => Err(Error::WrongProblem),
+        Problem::Rtm { fixed, geometry, .. } => {
+            if model.variant == Variant::A {
+                return Err(Error::InvalidModel("variant A has no forward model"));
+            }
+            let z: [R; N_LEARNED] = params.try_into().map_err(|_| Error::SizeMismatch {
+                what: "RTM variables",
+                expected: N_LEARNED,
+                found: params.len(),
+            })?;
+            model.problem.packed()?.forward_learned(&z, fixed, *geometry, out)
+        }
     }
 }
 

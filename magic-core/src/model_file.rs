@@ -14,13 +14,15 @@ use crate::effects::{Effect, MAX_EFFECTS};
 use crate::mogi::{self, Station};
 use crate::nn::{validate_chain, Activation, Layer, MAX_LAYERS};
 use crate::quant::LeF32;
+use crate::rtm::bands::Packed;
+use crate::rtm::{Fixed, Geometry, N_BANDS, N_LEARNED};
 use crate::Error;
 use serde::{Deserialize, Serialize};
 
 /// The first four bytes of every model file.
 pub const MAGIC: [u8; 4] = *b"MAGC";
 /// The format version this build reads and writes.
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
 /// Largest station network the compiled core accepts.
 pub const MAX_STATIONS: usize = 32;
 /// Largest number of physical variables (source parameters plus effect parameters).
@@ -44,7 +46,7 @@ pub enum Variant {
 
 /// The physical problem and its fixed description.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum Problem {
+pub enum Problem<'a> {
     /// Mogi source under a GNSS network; observations are uₑ ×S, uₙ ×S, uᵥ ×S in mm.
     Mogi {
         /// Station positions, in the order of the observation channels.
@@ -52,17 +54,88 @@ pub enum Problem {
         /// Station names (e.g. `AV08`), in the same order; the data columns are `ux_<NAME>` etc.
         names: heapless::Vec<heapless::String<8>, MAX_STATIONS>,
     },
-    /// INFORM forest reflectance observed in spectral bands.
-    Rtm,
+    /// INFORM forest reflectance in Sentinel-2 bands; observations are the observed bands'
+    /// reflectances, in band order. Self-contained: the table rows the observed bands need are
+    /// carried in f32 (see [`crate::rtm::bands`]), about 81 KiB for the 11 bands of the S2 data.
+    Rtm {
+        /// Geometry mode of INFORM.
+        #[serde(with = "GeometryDef")]
+        geometry: Geometry,
+        /// The inputs that are not learned (angles, pigments, soil, leaf angles, stem density).
+        #[serde(with = "FixedDef")]
+        fixed: Fixed,
+        /// Bit `b` set when Sentinel-2 band `b` (order of [`crate::rtm::S2_BANDS`]) is observed.
+        bands: u16,
+        /// Spectral rows ([`crate::rtm::bands::ROW_WIDTH`] values each).
+        #[serde(borrow)]
+        spectral: LeF32<'a>,
+        /// Resampling weights, one row per spectral row, one column per observed band.
+        #[serde(borrow)]
+        weights: LeF32<'a>,
+        /// Beta leaf-angle table, 13 angles × distributions, angle-major.
+        #[serde(borrow)]
+        lidf_beta: LeF32<'a>,
+    },
 }
 
-impl Problem {
+/// Serde mirror of [`Geometry`].
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Geometry")]
+enum GeometryDef {
+    Reference,
+    Physical,
+}
+
+/// Serde mirror of [`Fixed`].
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "Fixed")]
+struct FixedDef {
+    car: f64,
+    anth: f64,
+    cbrown: f64,
+    cp: f64,
+    cbc: f64,
+    type_lidf: f64,
+    lidf: f64,
+    hspot: f64,
+    psoil: f64,
+    tts: f64,
+    tto: f64,
+    psi: f64,
+    sd: f64,
+}
+
+impl<'a> Problem<'a> {
     /// A short name for messages.
     pub fn name(&self) -> &'static str {
         match self {
             Problem::Mogi { .. } => "mogi",
-            Problem::Rtm => "rtm",
+            Problem::Rtm { .. } => "rtm",
         }
+    }
+
+    /// The forward model of an RTM problem over its packed rows.
+    pub fn packed(&self) -> Result<Packed<LeF32<'a>>, Error> {
+        match *self {
+            Problem::Rtm { bands, spectral, weights, lidf_beta, .. } => {
+                Packed::new(spectral, weights, lidf_beta, bands.count_ones() as usize)
+            }
+            _ => Err(Error::WrongProblem),
+        }
+    }
+
+    /// Indices (into [`crate::rtm::S2_BANDS`]) of the observed bands of an RTM problem, in
+    /// order; `n` of the returned array are valid.
+    pub fn band_indices(&self) -> ([usize; N_BANDS], usize) {
+        let mut out = [0usize; N_BANDS];
+        let mut n = 0;
+        if let Problem::Rtm { bands, .. } = self {
+            for (b, slot) in (0..N_BANDS).filter(|b| bands & (1 << b) != 0).zip(out.iter_mut()) {
+                *slot = b;
+                n += 1;
+            }
+        }
+        (out, n)
     }
 }
 
@@ -72,7 +145,8 @@ pub struct Model<'a> {
     /// Paper variant.
     pub variant: Variant,
     /// Problem and geometry.
-    pub problem: Problem,
+    #[serde(borrow)]
+    pub problem: Problem<'a>,
     /// Observation mean (physical units) used to standardise: z = (x − mean) / scale.
     #[serde(borrow)]
     pub obs_mean: LeF32<'a>,
@@ -202,7 +276,40 @@ impl<'a> Model<'a> {
                 }
                 mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
             }
-            Problem::Rtm => return Err(Error::InvalidModel("RTM models are not supported by this build")),
+            Problem::Rtm { bands, fixed, .. } => {
+                if *bands >> N_BANDS != 0 {
+                    return Err(Error::InvalidModel("RTM band mask names bands beyond B12"));
+                }
+                if bands.count_ones() as usize != n_obs {
+                    return Err(Error::SizeMismatch {
+                        what: "observations (one per observed band)",
+                        expected: bands.count_ones() as usize,
+                        found: n_obs,
+                    });
+                }
+                let packed = self.problem.packed()?;
+                if !self.effects.is_empty() {
+                    return Err(Error::InvalidModel("RTM models declare no effects"));
+                }
+                let f = fixed;
+                let all = [f.car, f.anth, f.cbrown, f.cp, f.cbc, f.type_lidf, f.lidf, f.hspot, f.psoil, f.tts, f.tto, f.psi, f.sd];
+                if let Some(index) = all.iter().position(|v| !v.is_finite()) {
+                    return Err(Error::NonFinite { what: "RTM fixed input", index });
+                }
+                if self.variant != Variant::A {
+                    // The fixed inputs must be accepted by the forward model (angles, soil, LIDF
+                    // row, …): run it once at the middle of the bounds.
+                    let mut z = [0f64; N_LEARNED];
+                    for (zi, b) in z.iter_mut().zip(self.bounds.iter()) {
+                        *zi = 0.5 * (b[0] as f64 + b[1] as f64);
+                    }
+                    if self.bounds.len() == N_LEARNED && self.bounds.iter().all(|b| b[0] > 0.0 && b[0] < b[1]) {
+                        let mut y = [0f64; N_BANDS];
+                        packed.forward_learned(&z, fixed, geometry_of(&self.problem), &mut y[..n_obs])?;
+                    }
+                }
+                N_LEARNED
+            }
         };
         let n_params = self.n_params();
         match self.variant {
@@ -230,6 +337,11 @@ impl<'a> Model<'a> {
                         return Err(Error::InvalidModel("depth bound must be positive"));
                     }
                 }
+                if let Problem::Rtm { .. } = self.problem {
+                    if !self.bounds.iter().all(|b| b[0] > 0.0) {
+                        return Err(Error::InvalidModel("RTM variable bounds must be positive"));
+                    }
+                }
                 match self.variant {
                     Variant::C => validate_chain(&self.decoder, n_obs, n_obs)?,
                     _ => {
@@ -241,6 +353,14 @@ impl<'a> Model<'a> {
             }
         }
         Ok(())
+    }
+
+    /// The geometry mode of an RTM model.
+    pub fn rtm_geometry(&self) -> Result<Geometry, Error> {
+        match self.problem {
+            Problem::Rtm { geometry, .. } => Ok(geometry),
+            _ => Err(Error::WrongProblem),
+        }
     }
 
     /// Serialises into `buf`, returning the number of bytes written.
@@ -262,5 +382,12 @@ impl<'a> Model<'a> {
         let crc = CRC.checksum(&buf[..end]);
         buf[end..end + 4].copy_from_slice(&crc.to_le_bytes());
         Ok(end + 4)
+    }
+}
+
+fn geometry_of(p: &Problem<'_>) -> Geometry {
+    match p {
+        Problem::Rtm { geometry, .. } => *geometry,
+        _ => Geometry::Reference,
     }
 }

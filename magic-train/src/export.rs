@@ -143,8 +143,8 @@ impl OwnedEffect {
 pub struct OwnedModel {
     /// Paper variant.
     pub variant: Variant,
-    /// Problem description.
-    pub problem: Problem,
+    /// Problem description (RTM table bytes interned: see `data::rtm_tables::intern`).
+    pub problem: Problem<'static>,
     /// Observation mean.
     pub mean: Vec<f32>,
     /// Observation scale.
@@ -240,7 +240,7 @@ impl OwnedModel {
             decoder,
             residual_threshold: self.residual_threshold,
         };
-        let mut buf = vec![0u8; 64 * 1024 + 8 * mean.len() + eff_b.iter().map(Vec::len).sum::<usize>() + enc_b.iter().chain(&dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
+        let mut buf = vec![0u8; 64 * 1024 + crate::data::rtm_tables::problem_bytes(&self.problem) + 8 * mean.len() + eff_b.iter().map(Vec::len).sum::<usize>() + enc_b.iter().chain(&dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
         let n = model.encode(&mut buf).map_err(|e| anyhow::anyhow!("encoding the model: {e}"))?;
         buf.truncate(n);
         Model::decode(&buf).map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
@@ -266,7 +266,7 @@ impl OwnedModel {
         };
         OwnedModel {
             variant: m.variant,
-            problem: m.problem.clone(),
+            problem: crate::data::rtm_tables::owned_problem(&m.problem),
             mean: m.obs_mean.iter().collect(),
             scale: m.obs_scale.iter().collect(),
             bounds: m.bounds.iter().copied().collect(),
@@ -278,7 +278,7 @@ impl OwnedModel {
     }
 
     /// Builds the f32 model of a trained network (with the effects its physics declares).
-    pub fn from_net(net: &Net, problem: Problem, effects: Vec<OwnedEffect>) -> Result<OwnedModel> {
+    pub fn from_net(net: &Net, problem: Problem<'static>, effects: Vec<OwnedEffect>) -> Result<OwnedModel> {
         let layers = |m: &Mlp| -> Result<Vec<OwnedLayer>> {
             m.layers
                 .iter()

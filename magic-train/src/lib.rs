@@ -14,6 +14,8 @@ pub mod nets;
 pub mod physics;
 pub mod records;
 pub mod reproduce;
+pub mod rtm_physics;
+pub mod rtm_pipeline;
 pub mod synth;
 pub mod pipeline;
 pub mod qemu;

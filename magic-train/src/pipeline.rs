@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use std::sync::Arc;
 
 /// The Mogi problem description of a network.
-pub fn mogi_problem(names: &[String], stations: &[Station]) -> Result<Problem> {
+pub fn mogi_problem(names: &[String], stations: &[Station]) -> Result<Problem<'static>> {
     let mut v = heapless::Vec::new();
     let mut n = heapless::Vec::new();
     for (name, s) in names.iter().zip(stations) {

@@ -7,7 +7,7 @@
 
 use crate::data::gnss::channel_names;
 use crate::data::table::Table;
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use magic_core::line::{write_error, write_result, LineError};
 use magic_core::model_file::Problem;
 use magic_core::{invert_at, Model, Workspace};
@@ -33,7 +33,10 @@ impl ObsRow {
 pub fn model_channels(model: &Model<'_>) -> Result<Vec<String>> {
     match &model.problem {
         Problem::Mogi { names, .. } => Ok(channel_names(&names.iter().map(|s| s.as_str().to_string()).collect::<Vec<_>>())),
-        Problem::Rtm => bail!("RTM models are not supported by this command yet"),
+        Problem::Rtm { .. } => {
+            let (idx, n) = model.problem.band_indices();
+            Ok(idx[..n].iter().map(|&b| magic_core::rtm::S2_BANDS[b].to_string()).collect())
+        }
     }
 }
 
@@ -42,7 +45,11 @@ pub fn model_channels(model: &Model<'_>) -> Result<Vec<String>> {
 pub fn read_obs(path: &Path, model: &Model<'_>, standardized: bool) -> Result<Vec<ObsRow>> {
     let t = Table::read(path, b',')?;
     let chans = model_channels(model)?;
-    let cols: Vec<usize> = chans.iter().map(|c| t.col(c)).collect::<Result<_>>()?;
+    let cols: Vec<usize> = match model.problem {
+        // Band `B02` is the column `B02` or `B02_<name>` (as in the S2 data files).
+        Problem::Rtm { .. } => chans.iter().map(|c| crate::data::s2::band_column(&t, c)).collect::<Result<_>>()?,
+        _ => chans.iter().map(|c| t.col(c)).collect::<Result<_>>()?,
+    };
     let date = t.col("date").ok();
     let mut rows = Vec::with_capacity(t.rows.len());
     for r in 0..t.rows.len() {
@@ -75,9 +82,10 @@ pub fn result_header(model: &Model<'_>, with_date: bool) -> String {
     if with_date {
         h.push_str("date,");
     }
-    let names: &[&str] = match model.problem {
-        Problem::Mogi { .. } => &magic_core::mogi::PARAM_NAMES,
-        Problem::Rtm => &[],
+    let names: &[&str] = match (&model.problem, model.variant) {
+        (Problem::Mogi { .. }, _) => &magic_core::mogi::PARAM_NAMES,
+        (Problem::Rtm { .. }, magic_core::Variant::A) => &[],
+        (Problem::Rtm { .. }, _) => &RTM_RESULT_NAMES,
     };
     for n in names {
         h.push_str(n);
@@ -86,6 +94,10 @@ pub fn result_header(model: &Model<'_>, with_date: bool) -> String {
     h.push_str("residual_rms,flags,stations_used");
     h
 }
+
+/// Result columns of an RTM inversion: the 7 learned variables, then the derived crown diameter
+/// and tree height.
+pub const RTM_RESULT_NAMES: [&str; 9] = ["N", "cab", "cw", "cm", "LAI", "LAIu", "fc", "cd", "h"];
 
 /// Inverts rows on the host (physics in f64), returning one result line per row.
 pub fn invert_rows(model: &Model<'_>, rows: &[ObsRow]) -> Vec<String> {

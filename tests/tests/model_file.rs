@@ -77,8 +77,15 @@ fn wrong_version_problem_and_sizes() {
 
     // A model for another problem kind.
     let mut own = random_mogi_model(Variant::B, 2);
-    own.problem = Problem::Rtm;
-    assert!(own.encode().is_err(), "an RTM model without RTM support must not validate");
+    own.problem = Problem::Rtm {
+        geometry: magic_core::rtm::Geometry::Reference,
+        fixed: magic_core::rtm::Fixed::default(),
+        bands: 0b1_1011_1111_1110,
+        spectral: magic_core::quant::LeF32(&[]),
+        weights: magic_core::quant::LeF32(&[]),
+        lidf_beta: magic_core::quant::LeF32(&[]),
+    };
+    assert!(own.encode().is_err(), "a GNSS network's model relabelled as RTM must not validate");
 
     // Sizes that do not fit the network: one station fewer than the observation count.
     let mut own = random_mogi_model(Variant::B, 2);

@@ -7,10 +7,13 @@
 //!   [`Geometry::Physical`] follows the published equations;
 //! * [`sensor`] — band integration with a resampling matrix;
 //! * [`model`] — the whole chain over borrowed tables: 21 inputs → 13 Sentinel-2 bands, with the
-//!   exact Jacobian for the 7 learned variables.
+//!   exact Jacobian for the 7 learned variables;
+//! * [`bands`] — the same model on the table rows a set of observed bands needs, from `f64`
+//!   slices or a model file's `f32` bytes (what an exported RTM model carries).
 //!
 //! The spectral tables are inputs ([`Tables`]); this crate ships none.
 
+pub mod bands;
 pub mod inform;
 pub mod model;
 pub mod prospect;

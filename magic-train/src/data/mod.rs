@@ -1,6 +1,9 @@
-//! Data readers: where the data lives, the GNSS splits, and numeric CSV tables.
+//! Data readers: where the data lives, the GNSS splits, the S2 spectra, the INFORM tables, and
+//! numeric CSV tables.
 
 pub mod gnss;
+pub mod rtm_tables;
+pub mod s2;
 pub mod table;
 pub mod tenv3;
 

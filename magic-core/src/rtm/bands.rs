@@ -1,0 +1,452 @@
+//! INFORM on the table rows a set of observed bands needs, from `f64` slices (host) or from the
+//! little-endian `f32` bytes of a model file (board).
+//!
+//! A model file cannot carry the 2101-wavelength tables of [`Tables`](super::Tables) (≈ 300 KiB in
+//! f32 with the full resampling matrix) and does not need to: a band only sees the wavelengths
+//! where its spectral response is non-zero. [`Packed`] keeps, for each such wavelength in
+//! ascending order, one *spectral row* of [`ROW_WIDTH`] values
+//!
+//! ```text
+//! nr k_cab k_car k_anth k_brown k_cw k_cm t12 tav90n | soil_dry soil_wet | es ed
+//! ```
+//!
+//! and one *weight row* (the resampling weights of the observed bands, in band order), plus the
+//! beta leaf-angle table (13 angles × rows, angle-major as in `lidf_tables.csv`). For the 11 bands
+//! of the S2 dataset that is 842 rows, 81 KiB in f32.
+//!
+//! [`Packed::forward`] evaluates exactly what [`Inform::forward`] does, restricted to these rows,
+//! in any [`Real`] (`f32` on the board), without allocation; [`Packed::jacobian`] is the
+//! split-chain-rule Jacobian of [`Inform::jacobian`] for the learned variables.
+
+use super::inform::{Geometry, Scene, SpectralRow};
+use super::model::{
+    inputs_from_learned, Fixed, Inform, Tables, LANES, N_BANDS, N_INPUTS, N_LEARNED,
+};
+use super::prospect::{leaf_optics, CoefRow, Coefficients, Leaf, LeafOptics};
+use super::sail::LITAB_DEG;
+use crate::quant::LeF32;
+use crate::real::{Dual, Real};
+use crate::Error;
+
+/// Values per spectral row (9 PROSPECT-D coefficients, 2 soil spectra, 2 irradiances).
+pub const ROW_WIDTH: usize = 13;
+
+/// Largest number of beta leaf-angle distributions (table rows) a packed model carries.
+pub const MAX_BETA_ROWS: usize = 8;
+
+/// Largest number of spectral rows (the whole 1 nm grid from 400 to 2500 nm).
+pub const MAX_ROWS: usize = 2101;
+
+/// Where the packed numbers live: `f64` slices or little-endian `f32` bytes.
+pub trait Values: Copy {
+    /// Number of values.
+    fn len(&self) -> usize;
+    /// Whether empty.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Value `i` (0 past the end; lengths are checked by [`Packed::new`]).
+    fn at(&self, i: usize) -> f64;
+}
+
+impl Values for &[f64] {
+    #[inline]
+    fn len(&self) -> usize {
+        <[f64]>::len(self)
+    }
+    #[inline]
+    fn at(&self, i: usize) -> f64 {
+        self.get(i).copied().unwrap_or(0.0)
+    }
+}
+
+impl Values for LeF32<'_> {
+    #[inline]
+    fn len(&self) -> usize {
+        LeF32::len(self)
+    }
+    #[inline]
+    fn at(&self, i: usize) -> f64 {
+        self.get(i) as f64
+    }
+}
+
+/// INFORM restricted to the rows of a set of observed bands.
+#[derive(Clone, Copy, Debug)]
+pub struct Packed<V> {
+    spectral: V,
+    weights: V,
+    lidf_beta: V,
+    n_rows: usize,
+    n_bands: usize,
+}
+
+/// Zero-length stand-ins for the spectral tables when only the wavelength-independent part of
+/// INFORM ([`Inform::scene`]) is needed.
+const NO_WL: [f64; 1] = [0.0];
+const NO_BANDS: [f64; N_BANDS] = [0.0; N_BANDS];
+
+impl<V: Values> Packed<V> {
+    /// Wraps packed rows: `spectral` (`n_rows × ROW_WIDTH`), `weights` (`n_rows × n_bands`),
+    /// `lidf_beta` (`13 × k`, `1 ≤ k ≤ MAX_BETA_ROWS`). Fails on sizes that do not agree, on more
+    /// than [`MAX_ROWS`] rows or [`N_BANDS`] bands, and on non-finite values.
+    pub fn new(spectral: V, weights: V, lidf_beta: V, n_bands: usize) -> Result<Self, Error> {
+        if n_bands == 0 || n_bands > N_BANDS {
+            return Err(Error::OutOfRange {
+                what: "number of observed bands",
+            });
+        }
+        let n_rows = spectral.len() / ROW_WIDTH;
+        if n_rows == 0 || n_rows > MAX_ROWS || n_rows * ROW_WIDTH != spectral.len() {
+            return Err(Error::SizeMismatch {
+                what: "packed spectral rows (13 values per row)",
+                expected: n_rows.clamp(1, MAX_ROWS) * ROW_WIDTH,
+                found: spectral.len(),
+            });
+        }
+        if weights.len() != n_rows * n_bands {
+            return Err(Error::SizeMismatch {
+                what: "packed band weights",
+                expected: n_rows * n_bands,
+                found: weights.len(),
+            });
+        }
+        let nb = LITAB_DEG.len();
+        let k = lidf_beta.len() / nb;
+        if k == 0 || k > MAX_BETA_ROWS || k * nb != lidf_beta.len() {
+            return Err(Error::SizeMismatch {
+                what: "lidf beta table (13 angles x rows)",
+                expected: k.clamp(1, MAX_BETA_ROWS) * nb,
+                found: lidf_beta.len(),
+            });
+        }
+        for (what, v) in [
+            ("packed spectral rows", spectral),
+            ("packed band weights", weights),
+            ("lidf beta table", lidf_beta),
+        ] {
+            if let Some(index) = (0..v.len()).find(|&i| !v.at(i).is_finite()) {
+                return Err(Error::NonFinite { what, index });
+            }
+        }
+        Ok(Packed {
+            spectral,
+            weights,
+            lidf_beta,
+            n_rows,
+            n_bands,
+        })
+    }
+
+    /// Number of spectral rows.
+    pub fn n_rows(&self) -> usize {
+        self.n_rows
+    }
+
+    /// Number of observed bands.
+    pub fn n_bands(&self) -> usize {
+        self.n_bands
+    }
+
+    /// Number of beta leaf-angle distributions.
+    pub fn n_beta_rows(&self) -> usize {
+        self.lidf_beta.len() / LITAB_DEG.len()
+    }
+
+    /// Spectral row `i` (`i < n_rows`).
+    #[inline]
+    pub fn row(&self, i: usize) -> SpectralRow {
+        let b = i * ROW_WIDTH;
+        let s = |k: usize| self.spectral.at(b + k);
+        SpectralRow {
+            coef: CoefRow {
+                nr: s(0),
+                k_cab: s(1),
+                k_car: s(2),
+                k_anth: s(3),
+                k_brown: s(4),
+                k_cw: s(5),
+                k_cm: s(6),
+                t12: s(7),
+                tav90n: s(8),
+            },
+            soil_dry: s(9),
+            soil_wet: s(10),
+            es: s(11),
+            ed: s(12),
+        }
+    }
+
+    /// Weight of row `i` in band `b`.
+    #[inline]
+    pub fn weight(&self, i: usize, b: usize) -> f64 {
+        self.weights.at(i * self.n_bands + b)
+    }
+
+    /// Validates the 21 inputs and computes the wavelength-independent terms (the checks and the
+    /// scene of [`Inform::scene`], with this model's beta table).
+    pub fn scene<R: Real>(&self, x: &[R; N_INPUTS], geometry: Geometry) -> Result<Scene<R>, Error> {
+        let mut beta = [0f64; 13 * MAX_BETA_ROWS];
+        let n = self.lidf_beta.len();
+        for (i, b) in beta[..n].iter_mut().enumerate() {
+            *b = self.lidf_beta.at(i);
+        }
+        let c = &NO_WL[..];
+        let tables = Tables {
+            prospect: Coefficients {
+                nr: c,
+                k_cab: c,
+                k_car: c,
+                k_anth: c,
+                k_brown: c,
+                k_cw: c,
+                k_cm: c,
+                t12: c,
+                tav90n: c,
+            },
+            soil_dry: c,
+            soil_wet: c,
+            es: c,
+            ed: c,
+            lidf_beta: &beta[..n],
+            resampling: &NO_BANDS,
+        };
+        Inform::new(tables)?.scene(x, geometry)
+    }
+
+    fn check_out<T>(&self, out: &[T]) -> Result<(), Error> {
+        if out.len() != self.n_bands {
+            return Err(Error::SizeMismatch {
+                what: "band output",
+                expected: self.n_bands,
+                found: out.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The observed bands for the 21 inputs (`out.len()` = number of bands). Errors as
+    /// [`Inform::forward`].
+    pub fn forward<R: Real>(
+        &self,
+        x: &[R; N_INPUTS],
+        geometry: Geometry,
+        out: &mut [R],
+    ) -> Result<(), Error> {
+        self.check_out(out)?;
+        let scene = self.scene(x, geometry)?;
+        out.iter_mut().for_each(|o| *o = R::zero());
+        let acc = |i: usize, r: R, out: &mut [R]| {
+            for (b, o) in out.iter_mut().enumerate() {
+                let w = self.weight(i, b);
+                if w != 0.0 {
+                    *o += R::c(w) * r;
+                }
+            }
+        };
+        if core::mem::size_of::<R>() <= 8 {
+            // Plain floats: LANES rows at a time (see `Scene::wavelengths`); the last batch is
+            // padded with its last row and the padding ignored.
+            let mut i = 0;
+            while i < self.n_rows {
+                let ix: [usize; LANES] = core::array::from_fn(|j| (i + j).min(self.n_rows - 1));
+                let rows = ix.map(|k| self.row(k));
+                let t = scene.wavelengths(&rows);
+                for j in 0..LANES.min(self.n_rows - i) {
+                    acc(i + j, t[j].r_forest, out);
+                }
+                i += LANES;
+            }
+        } else {
+            for i in 0..self.n_rows {
+                acc(i, scene.wavelength(&self.row(i)).r_forest, out);
+            }
+        }
+        Ok(())
+    }
+
+    /// The observed bands from the learned variables `[N, cab, cw, cm, LAI, LAIu, fc]`.
+    pub fn forward_learned<R: Real>(
+        &self,
+        z: &[R; N_LEARNED],
+        fixed: &Fixed,
+        geometry: Geometry,
+        out: &mut [R],
+    ) -> Result<(), Error> {
+        if let Some(i) = z.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "learned variable",
+                index: i,
+            });
+        }
+        if z[6].value() <= 0.0 {
+            return Err(Error::OutOfRange {
+                what: "fc (must be > 0)",
+            });
+        }
+        self.forward(&inputs_from_learned(z, fixed), geometry, out)
+    }
+
+    /// Bands and exact Jacobian `∂band/∂z` (`jac[b]`, 7 per band) at the learned variables, by
+    /// the split chain rule of [`Inform::jacobian`] (leaf on `Dual<4>`, canopy on `Dual<5>`).
+    pub fn jacobian(
+        &self,
+        z: &[f64; N_LEARNED],
+        fixed: &Fixed,
+        geometry: Geometry,
+        out: &mut [f64],
+        jac: &mut [[f64; N_LEARNED]],
+    ) -> Result<(), Error> {
+        self.check_out(out)?;
+        self.check_out(jac)?;
+        if let Some(i) = z.iter().position(|v| !v.is_finite()) {
+            return Err(Error::NonFinite {
+                what: "learned variable",
+                index: i,
+            });
+        }
+        if z[6] <= 0.0 {
+            return Err(Error::OutOfRange {
+                what: "fc (must be > 0)",
+            });
+        }
+        // Canopy: LAI, LAIu, fc carry slots 2, 3, 4 (slots 0, 1 are leaf ρ, τ).
+        let z5: [Dual<5>; N_LEARNED] = core::array::from_fn(|i| {
+            if i >= 4 {
+                Dual::var(z[i], i - 2)
+            } else {
+                Dual::constant(z[i])
+            }
+        });
+        let scene = self.scene(&inputs_from_learned(&z5, fixed), geometry)?;
+        // Leaf: N, cab, cw, cm carry slots 0..4.
+        let leaf4 = Leaf {
+            n: Dual::<4>::var(z[0], 0),
+            cab: Dual::var(z[1], 1),
+            car: Dual::constant(fixed.car),
+            anth: Dual::constant(fixed.anth),
+            cbrown: Dual::constant(fixed.cbrown),
+            cw: Dual::var(z[2], 2),
+            cm: Dual::var(z[3], 3),
+        };
+        out.iter_mut().for_each(|o| *o = 0.0);
+        jac.iter_mut().for_each(|r| *r = [0.0; N_LEARNED]);
+        for i in 0..self.n_rows {
+            let row = self.row(i);
+            let lo = leaf_optics(&row.coef, &leaf4);
+            let seeded = LeafOptics {
+                refl: Dual::<5>::var(lo.refl.v, 0),
+                trans: Dual::<5>::var(lo.trans.v, 1),
+            };
+            let [t] = scene.wavelengths_with_leaf(&[row], &[seeded]);
+            let r = t.r_forest;
+            let mut d = [0.0; N_LEARNED];
+            for (k, dk) in d.iter_mut().take(4).enumerate() {
+                *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
+            }
+            d[4..].copy_from_slice(&r.d[2..]);
+            for b in 0..self.n_bands {
+                let w = self.weight(i, b);
+                if w != 0.0 {
+                    out[b] += w * r.v;
+                    for (j, dj) in jac[b].iter_mut().zip(&d) {
+                        *j += w * dj;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two wavelengths, two bands, uniform beta row: packed f64 and f32 bytes agree, the
+    /// Jacobian agrees with Dual<7> forward mode.
+    #[test]
+    fn f64_and_f32_rows_agree() {
+        let row = |nr: f64, k: f64| {
+            [
+                nr, k, 0.1, 0.02, 0.3, 0.01, 50.0, 0.95, 0.9, 0.25, 0.08, 1.0, 0.6,
+            ]
+        };
+        let mut spectral = [0.0; 2 * ROW_WIDTH];
+        spectral[..13].copy_from_slice(&row(1.5, 0.05));
+        spectral[13..].copy_from_slice(&row(1.45, 0.0));
+        let weights = [0.7, 0.0, 0.3, 1.0];
+        let beta = [1.0 / 13.0; 13];
+        let p = Packed::new(&spectral[..], &weights[..], &beta[..], 2).unwrap();
+        let fixed = Fixed {
+            lidf: 0.0,
+            ..Fixed::default()
+        };
+        let z = [1.6, 45.0, 0.012, 0.01, 2.5, 0.4, 0.6];
+        let mut y = [0.0; 2];
+        p.forward_learned(&z, &fixed, Geometry::Reference, &mut y)
+            .unwrap();
+        assert!(y.iter().all(|v| *v > 0.0 && *v < 1.0), "{y:?}");
+
+        let bytes = |v: &[f64]| {
+            let mut b = [0u8; 4 * 2 * ROW_WIDTH];
+            for (c, x) in b.chunks_exact_mut(4).zip(v) {
+                c.copy_from_slice(&(*x as f32).to_le_bytes());
+            }
+            (b, 4 * v.len())
+        };
+        let (sb, sn) = bytes(&spectral);
+        let (wb, wn) = bytes(&weights);
+        let (bb, bn) = bytes(&beta);
+        let q = Packed::new(LeF32(&sb[..sn]), LeF32(&wb[..wn]), LeF32(&bb[..bn]), 2).unwrap();
+        let mut y32 = [0f32; 2];
+        q.forward_learned(&z.map(|v| v as f32), &fixed, Geometry::Reference, &mut y32)
+            .unwrap();
+        for (a, b) in y.iter().zip(&y32) {
+            assert!((a - *b as f64).abs() < 1e-5, "{a} {b}");
+        }
+
+        let (mut yj, mut jac) = ([0.0; 2], [[0.0; N_LEARNED]; 2]);
+        p.jacobian(&z, &fixed, Geometry::Physical, &mut yj, &mut jac)
+            .unwrap();
+        let z7: [Dual<N_LEARNED>; N_LEARNED] = core::array::from_fn(|i| Dual::var(z[i], i));
+        let mut full = [Dual::<N_LEARNED>::constant(0.0); 2];
+        p.forward_learned(&z7, &fixed, Geometry::Physical, &mut full)
+            .unwrap();
+        for b in 0..2 {
+            assert!((yj[b] - full[b].v).abs() < 1e-15);
+            for j in 0..N_LEARNED {
+                assert!((jac[b][j] - full[b].d[j]).abs() <= 1e-12 * (1.0 + full[b].d[j].abs()));
+            }
+        }
+    }
+
+    #[test]
+    fn size_errors() {
+        let s = [0.5; ROW_WIDTH];
+        let beta = [1.0 / 13.0; 13];
+        assert!(Packed::new(&s[..], &[1.0][..], &beta[..], 1).is_ok());
+        assert!(Packed::new(&s[..12], &[1.0][..], &beta[..], 1).is_err());
+        assert!(Packed::new(&s[..], &[1.0, 0.0][..], &beta[..], 1).is_err());
+        assert!(Packed::new(&s[..], &[1.0][..], &beta[..12], 1).is_err());
+        assert!(Packed::new(&s[..], &[f64::NAN][..], &beta[..], 1).is_err());
+        assert!(Packed::new(&s[..], &[1.0][..], &beta[..], 0).is_err());
+        let p = Packed::new(&s[..], &[1.0][..], &beta[..], 1).unwrap();
+        let fixed = Fixed {
+            lidf: 1.0,
+            ..Fixed::default()
+        }; // beta row 1 does not exist
+        let z = [1.6, 45.0, 0.012, 0.01, 2.5, 0.4, 0.6];
+        assert!(p
+            .forward_learned(&z, &fixed, Geometry::Reference, &mut [0.0])
+            .is_err());
+        assert!(p
+            .forward_learned(
+                &z,
+                &Fixed { lidf: 0.0, ..fixed },
+                Geometry::Reference,
+                &mut [0.0; 2]
+            )
+            .is_err());
+    }
+}

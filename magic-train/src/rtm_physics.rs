@@ -1,0 +1,79 @@
+//! INFORM as a [`Physics`] for the trainer: the 7 learned variables `[N, cab, cw, cm, LAI, LAIu,
+//! fc]` → the observed Sentinel-2 bands (reflectance), over the same packed rows the model file
+//! carries (in f64 here), with the core's exact Jacobian.
+//!
+//! The day number `t` is passed by [`crate::physics::PhysicsOp`] but not used: the geometry is
+//! the fixed one of the model (the paper's sun zenith 30°, nadir view).
+
+use crate::data::rtm_tables::PackedRows;
+use crate::physics::Physics;
+use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
+use magic_core::Error;
+
+/// INFORM over packed f64 rows with fixed inputs and a geometry mode.
+#[derive(Clone, Debug)]
+pub struct RtmPhysics {
+    /// Table rows of the observed bands (f64).
+    pub rows: PackedRows,
+    /// Fixed inputs.
+    pub fixed: Fixed,
+    /// Geometry mode.
+    pub geometry: Geometry,
+}
+
+/// The fixed inputs of the oracle and the paper (A.3): [`Fixed::default`].
+pub fn paper_fixed() -> Fixed {
+    Fixed::default()
+}
+
+fn learned(p: &[f64]) -> Result<[f64; N_LEARNED], Error> {
+    p.try_into().map_err(|_| Error::SizeMismatch {
+        what: "RTM variables",
+        expected: N_LEARNED,
+        found: p.len(),
+    })
+}
+
+impl RtmPhysics {
+    /// The model over `rows` (checks the rows once).
+    pub fn new(rows: PackedRows, fixed: Fixed, geometry: Geometry) -> Result<Self, Error> {
+        rows.model()?;
+        Ok(RtmPhysics {
+            rows,
+            fixed,
+            geometry,
+        })
+    }
+}
+
+impl Physics for RtmPhysics {
+    fn n_params(&self) -> usize {
+        N_LEARNED
+    }
+    fn n_obs(&self) -> usize {
+        self.rows.bands.len()
+    }
+    fn forward(&self, p: &[f64], _t: f64, out: &mut [f64]) -> Result<(), Error> {
+        self.rows
+            .model()?
+            .forward_learned(&learned(p)?, &self.fixed, self.geometry, out)
+    }
+    fn jacobian(&self, p: &[f64], _t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), Error> {
+        let n = self.n_obs();
+        if jac.len() != n * N_LEARNED {
+            return Err(Error::SizeMismatch {
+                what: "jacobian",
+                expected: n * N_LEARNED,
+                found: jac.len(),
+            });
+        }
+        let mut j = [[0.0; N_LEARNED]; 16];
+        self.rows
+            .model()?
+            .jacobian(&learned(p)?, &self.fixed, self.geometry, out, &mut j[..n])?;
+        for (c, row) in j[..n].iter().enumerate() {
+            jac[c * N_LEARNED..(c + 1) * N_LEARNED].copy_from_slice(row);
+        }
+        Ok(())
+    }
+}
