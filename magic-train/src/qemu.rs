@@ -84,7 +84,9 @@ pub fn ensure_toolchain() -> Result<()> {
         .status()
     {
         Ok(s) if s.success() => {}
-        _ => missing.push("qemu-system-arm (Debian/Ubuntu: `apt-get install -y qemu-system-arm`)".to_string()),
+        _ => missing.push(
+            "qemu-system-arm (Debian/Ubuntu: `apt-get install -y qemu-system-arm`)".to_string(),
+        ),
     }
     let sysroot = Command::new(rustc())
         .args(["--print", "sysroot"])
@@ -92,9 +94,12 @@ pub fn ensure_toolchain() -> Result<()> {
         .ok()
         .filter(|o| o.status.success())
         .map(|o| PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()));
-    let has_target = sysroot.is_some_and(|s| s.join("lib/rustlib").join(TARGET).join("lib").is_dir());
+    let has_target =
+        sysroot.is_some_and(|s| s.join("lib/rustlib").join(TARGET).join("lib").is_dir());
     if !has_target {
-        missing.push(format!("the Rust target {TARGET} (`rustup target add {TARGET}`)"));
+        missing.push(format!(
+            "the Rust target {TARGET} (`rustup target add {TARGET}`)"
+        ));
     }
     if !missing.is_empty() {
         bail!("the firmware needs {}", missing.join(" and "));
@@ -110,8 +115,8 @@ fn rustc() -> String {
     std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into())
 }
 
-/// Builds concurrently started from this process one after the other: the firmware's ELF path is
-/// the same for every model.
+/// Builds started from this process run one after the other: cargo writes the firmware's ELF to
+/// the same path whatever the model.
 static BUILD: Mutex<()> = Mutex::new(());
 
 /// Builds the firmware with `model_path` embedded (`cargo build -p magic-firmware --target
@@ -121,47 +126,42 @@ pub fn build_firmware(model_path: &Path) -> Result<PathBuf> {
     let model_path = model_path
         .canonicalize()
         .with_context(|| format!("model file {}", model_path.display()))?;
-    let model = std::fs::read(&model_path).with_context(|| format!("reading {}", model_path.display()))?;
+    let model =
+        std::fs::read(&model_path).with_context(|| format!("reading {}", model_path.display()))?;
     let root = workspace_root()?;
     let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
-    // Another process may build the same ELF with another model between our build and our copy:
-    // the copy is checked to embed our model, and the build repeated if it does not.
-    for _ in 0..3 {
-        let out = Command::new(cargo())
-            .current_dir(&root)
-            .args([
-                "build",
-                "-p",
-                "magic-firmware",
-                "--target",
-                TARGET,
-                "--profile",
-                PROFILE,
-            ])
-            .args(["--message-format", "json-render-diagnostics"])
-            .env("MAGIC_MODEL", &model_path)
-            .stderr(Stdio::inherit())
-            .output()
-            .context("running cargo to build the firmware")?;
-        if !out.status.success() {
-            bail!(
-                "building the firmware failed ({}); see the compiler output above",
-                out.status
-            );
-        }
-        let elf = artifact_path(&String::from_utf8_lossy(&out.stdout))
-            .context("cargo did not report the firmware executable")?;
-        let bytes = std::fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?;
-        if !contains(&bytes, &model) {
-            continue;
-        }
-        let dir = elf.parent().unwrap_or(Path::new(".")).join("by-model");
-        std::fs::create_dir_all(&dir)?;
-        let copy = dir.join(format!("magic-firmware-{:016x}.elf", fnv1a(&model)));
-        std::fs::write(&copy, &bytes).with_context(|| format!("writing {}", copy.display()))?;
-        return Ok(copy);
+    let out = Command::new(cargo())
+        .current_dir(&root)
+        .args([
+            "build",
+            "-p",
+            "magic-firmware",
+            "--target",
+            TARGET,
+            "--profile",
+            PROFILE,
+        ])
+        .args(["--message-format", "json-render-diagnostics"])
+        .env("MAGIC_MODEL", &model_path)
+        .stderr(Stdio::inherit())
+        .output()
+        .context("running cargo to build the firmware")?;
+    if !out.status.success() {
+        bail!(
+            "building the firmware failed ({}); see the compiler output above",
+            out.status
+        );
     }
-    bail!("the firmware ELF kept being replaced by concurrent builds with other models")
+    let elf = artifact_path(&String::from_utf8_lossy(&out.stdout))
+        .context("cargo did not report the firmware executable")?;
+    // Copy it under a name of its own: the next build (another model) replaces cargo's ELF.
+    // Builds from other processes are not serialised with this one: run one at a time.
+    let dir = elf.parent().unwrap_or(Path::new(".")).join("by-model");
+    std::fs::create_dir_all(&dir)?;
+    let copy = dir.join(format!("magic-firmware-{:016x}.elf", fnv1a(&model)));
+    std::fs::copy(&elf, &copy)
+        .with_context(|| format!("copying {} to {}", elf.display(), copy.display()))?;
+    Ok(copy)
 }
 
 /// The executable of the `magic-firmware` bin from cargo's JSON messages.
@@ -172,10 +172,6 @@ fn artifact_path(json_lines: &str) -> Option<PathBuf> {
         .filter(|v| v["reason"] == "compiler-artifact" && v["target"]["name"] == "magic-firmware")
         .filter_map(|v| v["executable"].as_str().map(PathBuf::from))
         .last()
-}
-
-fn contains(hay: &[u8], needle: &[u8]) -> bool {
-    !needle.is_empty() && hay.windows(needle.len()).any(|w| w == needle)
 }
 
 fn fnv1a(b: &[u8]) -> u64 {
@@ -228,7 +224,9 @@ pub fn run_firmware(elf: &Path, input: &str, timeout_s: u64) -> Result<FirmwareR
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .with_context(|| format!("starting {prog} (is QEMU installed? see magic_train::qemu::ensure_toolchain)"))?;
+        .with_context(|| {
+            format!("starting {prog} (is QEMU installed? see magic_train::qemu::ensure_toolchain)")
+        })?;
     let mut stdin = child.stdin.take().context("QEMU stdin")?;
     let input = input.to_string();
     // Feed and drain on threads so that neither pipe can fill up and block the other.

@@ -1,0 +1,326 @@
+//! The Cortex-M4F firmware under QEMU against the host: a small int8 model built here is embedded
+//! in the firmware, ~50 observation lines (some malformed) are streamed through it, and every
+//! result must agree with `magic_core::invert::<f64>` on the host to 1e-4 of each variable's
+//! range. A corrupt or truncated model must make the firmware exit non-zero with an
+//! `error,model:` line.
+//!
+//! Needs `qemu-system-arm` and the Rust target `thumbv7em-none-eabihf`; without them the test
+//! fails with a message saying how to install them, unless `MAGIC_SKIP_QEMU=1`.
+
+use magic_core::model_file::{Model, Problem, Variant};
+use magic_core::mogi::{self, Station, PAPER_BOUNDS};
+use magic_core::nn::Activation;
+use magic_train::export::{OwnedLayer, OwnedModel, OwnedWeights};
+use magic_train::qemu::{build_firmware, ensure_toolchain, run_firmware};
+use std::path::PathBuf;
+
+const N_STATIONS: usize = 12;
+const N_OBS: usize = 3 * N_STATIONS;
+const TIMEOUT_S: u64 = 120;
+
+/// Whether the QEMU tests can run here; panics (test failure) when the tools are missing unless
+/// `MAGIC_SKIP_QEMU=1`.
+fn toolchain_ready() -> bool {
+    match ensure_toolchain() {
+        Ok(()) => true,
+        Err(e) if std::env::var("MAGIC_SKIP_QEMU").as_deref() == Ok("1") => {
+            eprintln!("notice: skipping the firmware test (MAGIC_SKIP_QEMU=1): {e}");
+            false
+        }
+        Err(e) => panic!("{e:#}\n(set MAGIC_SKIP_QEMU=1 to skip the QEMU tests)"),
+    }
+}
+
+/// A deterministic pseudo-random stream (xorshift64*), uniform in [-1, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        let v = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11;
+        v as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
+
+fn stations() -> Vec<Station> {
+    (0..N_STATIONS)
+        .map(|i| {
+            let a = i as f64 * std::f64::consts::TAU / N_STATIONS as f64;
+            let r = 3.0 + (i % 4) as f64 * 2.5;
+            Station {
+                x_km: r * a.cos() + 2.0,
+                y_km: r * a.sin(),
+                z_km: 0.1 * (i % 3) as f64,
+            }
+        })
+        .collect()
+}
+
+fn dense(rng: &mut Rng, rows: usize, cols: usize, act: Activation) -> OwnedLayer {
+    let s = (3.0 / cols as f64).sqrt();
+    let w = (0..rows * cols).map(|_| (rng.next() * s) as f32).collect();
+    let b = (0..rows).map(|_| (rng.next() * 0.1) as f32).collect();
+    OwnedLayer {
+        rows,
+        cols,
+        act,
+        weights: OwnedWeights::F32 { w, b },
+    }
+}
+
+/// Mogi displacements (mm) of a random source inside the paper's bounds, plus noise.
+fn observation(rng: &mut Rng, st: &[Station]) -> Vec<f32> {
+    let p: [f64; 4] = std::array::from_fn(|j| {
+        let [lo, hi] = PAPER_BOUNDS[j];
+        lo + (hi - lo) * (0.5 + 0.45 * rng.next())
+    });
+    let mut u = vec![0f64; N_OBS];
+    mogi::field(st, &p, &mut u).unwrap();
+    u.iter().map(|v| (v + 0.5 * rng.next()) as f32).collect()
+}
+
+/// A variant-C model (encoder 36-64-32-16-4, correction 36-144-36) with random weights,
+/// quantised to int8 with calibration rows, as model-file bytes.
+fn model_bytes() -> Vec<u8> {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let st = stations();
+    let rows: Vec<Vec<f32>> = (0..128).map(|_| observation(&mut rng, &st)).collect();
+    let mean: Vec<f32> = (0..N_OBS)
+        .map(|c| rows.iter().map(|r| r[c]).sum::<f32>() / rows.len() as f32)
+        .collect();
+    let scale: Vec<f32> = (0..N_OBS)
+        .map(|c| {
+            let v = rows.iter().map(|r| (r[c] - mean[c]).powi(2)).sum::<f32>() / rows.len() as f32;
+            v.sqrt().max(1e-3)
+        })
+        .collect();
+    let names = (0..N_STATIONS)
+        .map(|i| heapless::String::try_from(format!("S{i:02}").as_str()).unwrap())
+        .collect();
+    let problem = Problem::Mogi {
+        stations: st.iter().copied().collect(),
+        names,
+    };
+    let f32_model = OwnedModel {
+        variant: Variant::C,
+        problem,
+        mean: mean.clone(),
+        scale: scale.clone(),
+        bounds: PAPER_BOUNDS
+            .iter()
+            .map(|b| [b[0] as f32, b[1] as f32])
+            .collect(),
+        encoder: vec![
+            dense(&mut rng, 64, N_OBS, Activation::Relu),
+            dense(&mut rng, 32, 64, Activation::Relu),
+            dense(&mut rng, 16, 32, Activation::Relu),
+            dense(&mut rng, 4, 16, Activation::Sigmoid),
+        ],
+        decoder: vec![
+            dense(&mut rng, 4 * N_OBS, N_OBS, Activation::Relu),
+            dense(&mut rng, N_OBS, 4 * N_OBS, Activation::Linear),
+        ],
+        residual_threshold: 2.0,
+        effects: vec![],
+    };
+    let calib: Vec<Vec<f32>> = rows
+        .iter()
+        .map(|r| {
+            r.iter()
+                .enumerate()
+                .map(|(c, v)| (v - mean[c]) / scale[c])
+                .collect()
+        })
+        .collect();
+    f32_model.quantize_int8(&calib).unwrap().encode().unwrap()
+}
+
+/// Input lines: valid observations (some with missing channels) and malformed lines; for each,
+/// whether the firmware must answer with an error.
+fn input_lines() -> Vec<(String, bool)> {
+    let mut rng = Rng(0xD1B5_4A32_D192_ED03);
+    let st = stations();
+    let fmt = |v: &[f32]| {
+        v.iter()
+            .map(|x| {
+                if x.is_nan() {
+                    String::new()
+                } else {
+                    format!("{x}")
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let mut lines = Vec::new();
+    for i in 0..44 {
+        let mut obs = observation(&mut rng, &st);
+        if i % 11 == 5 {
+            obs[3] = f32::NAN; // a missing channel
+            obs[N_STATIONS + 3] = f32::NAN;
+        }
+        let text = if i % 7 == 3 {
+            obs.iter()
+                .map(|x| format!(" {x:.3} "))
+                .collect::<Vec<_>>()
+                .join(",")
+        } else {
+            fmt(&obs)
+        };
+        lines.push((text, false));
+    }
+    let good = fmt(&observation(&mut rng, &st));
+    let fields: Vec<&str> = good.split(',').collect();
+    lines.push((fields[..N_OBS - 1].join(","), true)); // one field short
+    lines.push((format!("{good},1.0"), true)); // one field too many
+    lines.push((good.replacen(fields[4], "abc", 1), true)); // not a number
+    lines.push((good.replacen(fields[7], "inf", 1), true)); // infinite
+    lines.push((good.replacen(fields[9], "12345.0", 1), true)); // beyond 10 m
+    lines.push((String::new(), true)); // empty line
+    lines.push((vec![""; N_OBS].join(","), true)); // every channel missing
+    lines.push((format!("{good}\r"), false)); // CRLF line end
+    lines
+}
+
+fn temp_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("magic-firmware-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn firmware_agrees_with_the_host() {
+    if !toolchain_ready() {
+        return;
+    }
+    let bytes = model_bytes();
+    let model = Model::decode(&bytes).unwrap();
+    let path = temp_dir().join("model.magic");
+    std::fs::write(&path, &bytes).unwrap();
+    let elf = build_firmware(&path).expect("building the firmware");
+
+    let lines = input_lines();
+    let input: String = lines.iter().map(|(l, _)| format!("{l}\n")).collect();
+    let run = run_firmware(&elf, &input, TIMEOUT_S).expect("running the firmware");
+    assert!(
+        run.success,
+        "firmware failed (exit {:?}): {:?}\n{}",
+        run.exit_code,
+        run.results.last(),
+        run.stderr
+    );
+    assert_eq!(
+        run.results.len(),
+        lines.len(),
+        "one output line per input line:\n{}",
+        run.results.join("\n")
+    );
+
+    let mut ws = magic_core::Workspace::default();
+    let mut worst = 0f64;
+    for ((line, must_fail), got) in lines.iter().zip(&run.results) {
+        let mut obs = vec![0f32; N_OBS];
+        let host = magic_core::line::parse_obs(line, &mut obs)
+            .map_err(|e| e.to_string())
+            .and_then(|()| {
+                magic_core::invert::<f64>(&model, &obs, &mut ws).map_err(|e| e.to_string())
+            });
+        match host {
+            Err(e) => {
+                assert!(
+                    got.starts_with("error,"),
+                    "host rejects {line:?} ({e}) but the firmware printed {got}"
+                );
+                assert_eq!(
+                    got,
+                    &format!("error,{e}"),
+                    "same message on host and board for {line:?}"
+                );
+            }
+            Ok(inv) => {
+                assert!(!must_fail, "{line:?} should have been rejected");
+                assert!(
+                    !got.starts_with("error"),
+                    "firmware rejected {line:?}: {got}"
+                );
+                let fields: Vec<&str> = got.split(',').collect();
+                assert_eq!(fields.len(), inv.n_params + 3, "{got}");
+                for j in 0..inv.n_params {
+                    let fw: f64 = fields[j].parse().unwrap();
+                    let [lo, hi] = model.bounds[j];
+                    let rel = (fw - inv.params[j]).abs() / (hi - lo) as f64;
+                    worst = worst.max(rel);
+                    assert!(
+                        rel <= 1e-4,
+                        "variable {j} of {line:?}: board {fw}, host {} ({rel:.2e} of the range)",
+                        inv.params[j]
+                    );
+                }
+                assert_eq!(
+                    fields[inv.n_params + 1].parse::<u8>().unwrap()
+                        & !magic_core::Flags::HIGH_RESIDUAL,
+                    inv.flags.0 & !magic_core::Flags::HIGH_RESIDUAL,
+                    "flags of {got}"
+                );
+                assert_eq!(
+                    fields[inv.n_params + 2].parse::<u32>().unwrap(),
+                    inv.used,
+                    "station mask of {got}"
+                );
+            }
+        }
+    }
+    let must_fail = lines.iter().filter(|(_, f)| *f).count();
+    let errors = run
+        .results
+        .iter()
+        .filter(|r| r.starts_with("error,"))
+        .count();
+    assert_eq!(errors, must_fail, "error lines");
+
+    eprintln!("firmware vs host: largest difference {worst:.2e} of a variable's range");
+    for (k, v) in &run.costs {
+        eprintln!("  {k} = {v}");
+    }
+    assert!(
+        run.instructions_per_inversion.is_some_and(|n| n > 0),
+        "instruction count reported"
+    );
+    assert!(
+        run.stack_bytes.is_some_and(|n| n > 0),
+        "stack high-water mark reported"
+    );
+    assert_eq!(
+        run.cost("clock_calibration_permille")
+            .map(|c| (990..=1010).contains(&c)),
+        Some(true),
+        "SysTick follows -icount"
+    );
+}
+
+#[test]
+fn corrupt_models_are_rejected_by_the_firmware() {
+    if !toolchain_ready() {
+        return;
+    }
+    let bytes = model_bytes();
+    let mut flipped = bytes.clone();
+    flipped[bytes.len() / 2] ^= 0x04;
+    let truncated = bytes[..bytes.len() - 100].to_vec();
+    for (name, b, want) in [
+        ("flipped", flipped, "corrupt"),
+        ("truncated", truncated, "truncated"),
+    ] {
+        let path = temp_dir().join(format!("{name}.magic"));
+        std::fs::write(&path, &b).unwrap();
+        let elf = build_firmware(&path).expect("building the firmware");
+        let run = run_firmware(&elf, "1,2,3\n", TIMEOUT_S).expect("running the firmware");
+        assert!(!run.success, "{name} model: firmware exited with success");
+        let first = run.results.first().cloned().unwrap_or_default();
+        assert!(
+            first.starts_with("error,model:") && first.contains(want),
+            "{name} model: {first}"
+        );
+    }
+}
