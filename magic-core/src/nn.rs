@@ -228,6 +228,9 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
                 if in_int8 {
                     return Err(Error::InvalidModel("f32 layer after int8 output"));
                 }
+                if w.0.len() < 4 * rows * cols {
+                    return Err(Error::SizeMismatch { what: "f32 layer weight bytes", expected: 4 * rows * cols, found: w.0.len() });
+                }
                 let (a, b) = s.f.split_at_mut(1);
                 let (src, dst) = if cur == 0 { (&a[0], &mut b[0]) } else { (&b[0], &mut a[0]) };
                 for r in 0..rows {
@@ -249,6 +252,12 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
                 }
             }
             Weights::Int8 { w, bias, w_scale, mult, shift, in_scale, .. } => {
+                if w.len() < rows * cols {
+                    return Err(Error::SizeMismatch { what: "int8 layer weight bytes", expected: rows * cols, found: w.len() });
+                }
+                if next_int8 && shift.len() < rows {
+                    return Err(Error::SizeMismatch { what: "int8 layer shift bytes", expected: rows, found: shift.len() });
+                }
                 if !in_int8 {
                     let inv = 1.0 / in_scale;
                     for c in 0..cols {
@@ -290,4 +299,41 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
     }
     output.copy_from_slice(&s.f[cur][..width]);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_answers_unvalidated_layers_with_errors() {
+        // Regression (fuzzing): `run` indexed weight and shift bytes without checking their
+        // lengths, so a layer that skipped `validate` panicked instead of returning an error.
+        let (w, b) = ([0u8; 4 * 3], [0u8; 4 * 2]);
+        let short_f32 = Layer { rows: 2, cols: 2, act: Activation::Linear, weights: Weights::F32 { w: LeF32(&w), bias: LeF32(&b) } };
+        let mut out = [0f32; 2];
+        let e = run(&[short_f32], &[1.0, 2.0], &mut out, &mut Scratch::default());
+        assert_eq!(e, Err(Error::SizeMismatch { what: "f32 layer weight bytes", expected: 16, found: 12 }));
+
+        let int8 = |w: &'static [u8], shift: &'static [u8]| Layer {
+            rows: 2,
+            cols: 2,
+            act: Activation::Relu,
+            weights: Weights::Int8 {
+                w,
+                bias: LeI32(&[]),
+                w_scale: LeF32(&[]),
+                mult: LeI32(&[]),
+                shift,
+                in_scale: 1.0,
+                out_scale: 1.0,
+            },
+        };
+        let e = run(&[int8(&[1u8; 3], &[0u8; 2])], &[1.0, 2.0], &mut out, &mut Scratch::default());
+        assert!(matches!(e, Err(Error::SizeMismatch { what: "int8 layer weight bytes", .. })), "{e:?}");
+        let e = run(&[int8(&[1u8; 4], &[0u8; 1]), int8(&[1u8; 4], &[0u8; 2])], &[1.0, 2.0], &mut out, &mut Scratch::default());
+        assert!(matches!(e, Err(Error::SizeMismatch { what: "int8 layer shift bytes", .. })), "{e:?}");
+        // The same layers with whole byte arrays run.
+        assert!(run(&[int8(&[1u8; 4], &[0u8; 2]), int8(&[1u8; 4], &[0u8; 2])], &[1.0, 2.0], &mut out, &mut Scratch::default()).is_ok());
+    }
 }

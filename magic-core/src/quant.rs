@@ -106,10 +106,11 @@ fn frexp(x: f64) -> (f64, i32) {
 }
 
 /// Applies an integer requantisation multiplier: `round(acc · m · 2^−(31+shift))`, saturated to
-/// int8 (±127). `shift` must lie in −30..=30 (checked when the model is loaded).
+/// int8 (±127). `shift` lies in −30..=30 (checked when the model is loaded); a shift outside that
+/// range is clamped to it rather than overflowing the bit shift.
 #[inline]
 pub fn requantize(acc: i32, m: i32, shift: i8) -> i8 {
-    let total = 31 + shift as i32; // 1..=61
+    let total = 31 + shift.clamp(-30, 30) as i32; // 1..=61
     let prod = acc as i64 * m as i64;
     let round = 1i64 << (total - 1);
     let y = (prod + round) >> total;
@@ -127,14 +128,16 @@ pub fn dot_i8(w: &[u8], x: &[i8]) -> i32 {
     let mut acc1 = 0i32;
     let mut wc = w.chunks_exact(2);
     let mut xc = x.chunks_exact(2);
+    // Wrapping sums: a layer (at most MAX_WIDTH inputs) cannot overflow, and a longer slice wraps
+    // like the DSP kernel instead of panicking in builds with overflow checks.
     for (a, b) in (&mut wc).zip(&mut xc) {
-        acc0 += (a[0] as i8 as i32) * (b[0] as i32);
-        acc1 += (a[1] as i8 as i32) * (b[1] as i32);
+        acc0 = acc0.wrapping_add((a[0] as i8 as i32) * (b[0] as i32));
+        acc1 = acc1.wrapping_add((a[1] as i8 as i32) * (b[1] as i32));
     }
     for (a, b) in wc.remainder().iter().zip(xc.remainder()) {
-        acc0 += (*a as i8 as i32) * (*b as i32);
+        acc0 = acc0.wrapping_add((*a as i8 as i32) * (*b as i32));
     }
-    acc0 + acc1
+    acc0.wrapping_add(acc1)
 }
 
 /// Number of `u32` words [`pack_i8_pairs`] writes for `n` activations: two per group of four.
@@ -203,12 +206,13 @@ pub fn dot_i8_packed_portable(w: &[u8], xp: &[u32]) -> i32 {
         let o = xp.get(2 * g + 1).copied().unwrap_or(0);
         let (w0, w1, w2, w3) = (b[0] as i8 as i32, b[1] as i8 as i32, b[2] as i8 as i32, b[3] as i8 as i32);
         // SMLAD(SXTB16(w), e) then SMLAD(SXTB16(w, ROR 8), o)
-        acc += w0 * lane(e, false) + w2 * lane(e, true);
-        acc += w1 * lane(o, false) + w3 * lane(o, true);
+        // Products of int8 values and pairs of them fit in i32; the running sum wraps as SMLAD's.
+        acc = acc.wrapping_add(w0 * lane(e, false) + w2 * lane(e, true));
+        acc = acc.wrapping_add(w1 * lane(o, false) + w3 * lane(o, true));
     }
     let base = w.len() - tail.len();
     for (j, &b) in tail.iter().enumerate() {
-        acc += (b as i8 as i32) * packed_get(xp, base + j);
+        acc = acc.wrapping_add((b as i8 as i32) * packed_get(xp, base + j));
     }
     acc
 }
@@ -394,5 +398,25 @@ mod tests {
         let x: [i8; 5] = [4, 5, -6, 2, -7];
         let naive: i32 = w.iter().zip(&x).map(|(a, b)| (*a as i8 as i32) * (*b as i32)).sum();
         assert_eq!(dot_i8(&w, &x), naive);
+    }
+
+    #[test]
+    fn out_of_contract_inputs_do_not_panic() {
+        // Regression (fuzzing): shifts outside -30..=30 overflowed the bit shift, and slices far
+        // longer than a layer overflowed the i32 sum (panics in builds with overflow checks).
+        for shift in i8::MIN..=i8::MAX {
+            for (acc, m) in [(i32::MIN, i32::MIN), (i32::MAX, i32::MAX), (1, 1 << 30), (-5, -7)] {
+                let q = requantize(acc, m, shift);
+                assert!((-127..=127).contains(&q));
+            }
+        }
+        assert_eq!(requantize(1000, 1 << 30, -31), requantize(1000, 1 << 30, -30));
+        let n = 300_000;
+        let (w, x) = (vec![0x81u8; n], vec![-127i8; n]);
+        let want = (0..n).fold(0i32, |a, _| a.wrapping_add(127 * 127));
+        assert_eq!(dot_i8(&w, &x), want);
+        let mut xp = vec![0u32; packed_words(n)];
+        pack_i8_pairs(&x, &mut xp);
+        assert_eq!(dot_i8_packed_portable(&w, &xp), want);
     }
 }

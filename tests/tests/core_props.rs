@@ -199,3 +199,155 @@ fn crc32(data: &[u8]) -> u32 {
     }
     !c
 }
+
+/// Deterministic filler bytes for generated layers.
+fn filler(seed: u64, n: usize) -> Vec<u8> {
+    let mut x = seed | 1;
+    (0..n)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 24) as u8
+        })
+        .collect()
+}
+
+/// Owned bytes of a layer that may be inconsistent (the validation `Model::decode` performs is
+/// skipped on purpose: `nn::run` is public and must answer with an error, not a panic).
+struct RawLayer {
+    rows: u16,
+    cols: u16,
+    act: magic_core::nn::Activation,
+    int8: bool,
+    bufs: [Vec<u8>; 5],
+    scales: (f32, f32),
+}
+
+impl RawLayer {
+    fn new(rows: u16, cols: u16, act: u8, int8: bool, exact: bool, seed: u64) -> RawLayer {
+        use magic_core::nn::Activation;
+        let (r, c) = (rows as usize, cols as usize);
+        let mut s = seed;
+        let mut len = |want: usize| {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            if exact {
+                want
+            } else {
+                (s >> 33) as usize % (want + 8)
+            }
+        };
+        let bufs = if int8 {
+            [
+                filler(seed, len(r * c)),
+                filler(seed + 1, len(4 * r)),
+                filler(seed + 2, len(4 * r)),
+                filler(seed + 3, len(4 * r)),
+                filler(seed + 4, len(r)),
+            ]
+        } else {
+            [
+                filler(seed, len(4 * r * c)),
+                filler(seed + 1, len(4 * r)),
+                vec![],
+                vec![],
+                vec![],
+            ]
+        };
+        let act = [Activation::Linear, Activation::Relu, Activation::Sigmoid][act as usize % 3];
+        let scales = (
+            f32::from_bits(seed as u32),
+            f32::from_bits((seed >> 32) as u32),
+        );
+        RawLayer {
+            rows,
+            cols,
+            act,
+            int8,
+            bufs,
+            scales,
+        }
+    }
+
+    fn layer(&self) -> magic_core::nn::Layer<'_> {
+        use magic_core::nn::{Layer, Weights};
+        use magic_core::quant::{LeF32, LeI32};
+        let b = &self.bufs;
+        let weights = if self.int8 {
+            Weights::Int8 {
+                w: &b[0],
+                bias: LeI32(&b[1]),
+                w_scale: LeF32(&b[2]),
+                mult: LeI32(&b[3]),
+                shift: &b[4],
+                in_scale: self.scales.0,
+                out_scale: self.scales.1,
+            }
+        } else {
+            Weights::F32 {
+                w: LeF32(&b[0]),
+                bias: LeF32(&b[1]),
+            }
+        };
+        Layer {
+            rows: self.rows,
+            cols: self.cols,
+            act: self.act,
+            weights,
+        }
+    }
+}
+
+proptest! {
+    #[test]
+    fn requantize_never_panics_on_any_shift(acc in any::<i32>(), m in any::<i32>(), shift in any::<i8>()) {
+        let q = requantize(acc, m, shift);
+        prop_assert!((-127..=127).contains(&q));
+    }
+
+    #[test]
+    fn dot_products_never_panic(n in 0usize..4096, w in any::<u8>(), x in any::<i8>()) {
+        let wv = vec![w; n];
+        let xv = vec![x; n];
+        let a = magic_core::quant::dot_i8(&wv, &xv);
+        let mut xp = vec![0u32; magic_core::quant::packed_words(n)];
+        magic_core::quant::pack_i8_pairs(&xv, &mut xp);
+        prop_assert_eq!(magic_core::quant::dot_i8_packed(&wv, &xp), a);
+    }
+
+    #[test]
+    fn running_unvalidated_layers_never_panics(
+        dims in proptest::collection::vec((0u16..300, 0u16..300, 0u8..3, any::<bool>(), any::<bool>(), any::<u64>()), 1..4),
+        chain in any::<bool>(),
+        n_in in 0usize..300,
+        n_out in 0usize..300,
+    ) {
+        // Either arbitrary sizes, or layers that chain (cols = previous rows) with arbitrary bytes.
+        let mut raw = Vec::new();
+        let mut width = n_in as u16;
+        for &(rows, cols, act, int8, exact, seed) in &dims {
+            let cols = if chain { width } else { cols };
+            raw.push(RawLayer::new(rows, cols, act, int8, exact, seed));
+            width = rows;
+        }
+        let layers: Vec<_> = raw.iter().map(RawLayer::layer).collect();
+        let input: Vec<f32> = (0..n_in).map(|i| i as f32 * 0.37 - 20.0).collect();
+        let mut output = vec![0f32; if chain { width as usize } else { n_out }];
+        let _ = magic_core::nn::run(&layers, &input, &mut output, &mut magic_core::nn::Scratch::default());
+        let _ = magic_core::nn::validate_chain(&layers, n_in, n_out);
+    }
+}
+
+#[test]
+fn dot_products_of_long_extreme_slices_never_panic() {
+    // Longer than any layer (MAX_WIDTH) and extreme: the i32 sum wraps as the DSP kernel's does.
+    let n = 300_000;
+    let w = vec![0x81u8; n]; // -127
+    let x = vec![-127i8; n];
+    let a = magic_core::quant::dot_i8(&w, &x);
+    let mut xp = vec![0u32; magic_core::quant::packed_words(n)];
+    magic_core::quant::pack_i8_pairs(&x, &mut xp);
+    assert_eq!(magic_core::quant::dot_i8_packed(&w, &xp), a);
+}
