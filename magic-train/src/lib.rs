@@ -14,6 +14,7 @@ pub mod nets;
 pub mod physics;
 pub mod records;
 pub mod reproduce;
+pub mod rtm_cli;
 pub mod rtm_physics;
 pub mod rtm_pipeline;
 pub mod synth;

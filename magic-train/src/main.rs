@@ -4,7 +4,8 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use magic_core::{Model, Variant};
 use magic_train::data::{self, gnss::GnssData};
-use magic_train::{demo, evaluate, pipeline, records, synth, OwnedModel, TrainConfig};
+use magic_core::model_file::Problem;
+use magic_train::{demo, evaluate, pipeline, records, rtm_cli, synth, OwnedModel, TrainConfig};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -105,11 +106,17 @@ enum Cmd {
     },
     /// Reproduce a table of the paper over several seeds (mean ± std).
     Reproduce {
-        /// Which table: `mogi` (Table 4).
+        /// Which table: `mogi` (Table 4) or `rtm` (Table 3).
         problem: String,
         /// Data folder.
         #[arg(long)]
         data_dir: Option<PathBuf>,
+        /// RTM tables folder (default: $MAGIC_DATA/rtm or ../shared/data/rtm).
+        #[arg(long)]
+        tables: Option<PathBuf>,
+        /// RTM variants to train, comma-separated.
+        #[arg(long, default_value = "A,B,C,D")]
+        variants: String,
         /// Seeds, comma-separated.
         #[arg(long, default_value = "1,2,3", value_delimiter = ',')]
         seeds: Vec<u64>,
@@ -117,6 +124,19 @@ enum Cmd {
         #[arg(long, default_value_t = 100)]
         epochs: usize,
         /// Write the numbers as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Retrieved LAI of an RTM model (B, C or D) against the SNAP LAI of the site extract: rank
+    /// correlation per species and date.
+    Lai {
+        /// RTM model file.
+        #[arg(long)]
+        model: PathBuf,
+        /// S2 folder (default: $MAGIC_DATA/s2 or ../shared/data/s2).
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Write the figures as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
     },
@@ -210,6 +230,22 @@ enum ForwardProblem {
         #[arg(long)]
         stations: Option<PathBuf>,
     },
+    /// INFORM reflectance in the 13 Sentinel-2 bands B01…B12 for rows of the 21 inputs (columns
+    /// named as in `oracle/rtm_inform_s2_10k.csv`).
+    Rtm {
+        /// Input CSV.
+        #[arg(long)]
+        input: PathBuf,
+        /// Output CSV (`B01` … `B12`; `sample_id` first when the input has one).
+        #[arg(long)]
+        output: PathBuf,
+        /// Geometry mode: `reference` (the paper's implementation) or `physical`.
+        #[arg(long, default_value = "reference")]
+        geometry: String,
+        /// Tables folder (default: $MAGIC_DATA/rtm or ../shared/data/rtm).
+        #[arg(long)]
+        tables: Option<PathBuf>,
+    },
 }
 
 #[derive(Subcommand)]
@@ -238,6 +274,33 @@ enum TrainProblem {
         /// the scale of the MSE term).
         #[arg(long, default_value = "mean")]
         smooth: String,
+        /// Output model file (f32).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// INFORM under the Sentinel-2 forest spectra.
+    Rtm {
+        /// Paper variant: A, B, C, or D (the regressor baseline).
+        #[arg(long, default_value = "C")]
+        variant: String,
+        /// Data folder laid out like `shared/data/s2`.
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Tables folder laid out like `shared/data/rtm`.
+        #[arg(long)]
+        tables: Option<PathBuf>,
+        /// Maximum epochs.
+        #[arg(long, default_value_t = 100)]
+        epochs: usize,
+        /// Random seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Geometry mode: `reference` (the paper's implementation) or `physical`.
+        #[arg(long, default_value = "reference")]
+        geometry: String,
+        /// Train on the first N training spectra only (0: all).
+        #[arg(long, default_value_t = 0)]
+        limit: usize,
         /// Output model file (f32).
         #[arg(long)]
         out: PathBuf,
@@ -290,10 +353,16 @@ fn run(cli: Cli) -> Result<()> {
                 out.display()
             );
         }
+        Cmd::Train { problem: TrainProblem::Rtm { variant, data_dir, tables, epochs, seed, geometry, limit, out } } => {
+            rtm_cli::train(&rtm_cli::TrainArgs { variant, data_dir, tables, epochs, seed, geometry, limit, out })?;
+        }
         Cmd::Eval { model, data_dir, split, json } => {
-            let data = load_gnss(data_dir.as_deref())?;
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
+            if let Problem::Rtm { .. } = m.problem {
+                return rtm_cli::eval(&m, data_dir.as_deref(), &split, json);
+            }
+            let data = load_gnss(data_dir.as_deref())?;
             let r = evaluate(&m, data.split(&split)?, &split)?;
             if json {
                 println!("{}", serde_json::to_string(&r)?);
@@ -309,11 +378,14 @@ fn run(cli: Cli) -> Result<()> {
             if quant != "int8" {
                 bail!("--quant {quant}: only int8 is supported");
             }
-            let data = load_gnss(data_dir.as_deref())?;
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
-            let q = OwnedModel::from_model(&m).quantize_int8(&data.train.x)?;
-            let qb = q.encode()?;
+            let qb = if let Problem::Rtm { .. } = m.problem {
+                rtm_cli::export_int8(&m, data_dir.as_deref())?
+            } else {
+                let data = load_gnss(data_dir.as_deref())?;
+                OwnedModel::from_model(&m).quantize_int8(&data.train.x)?.encode()?
+            };
             std::fs::write(&out, &qb).with_context(|| format!("{}: cannot write", out.display()))?;
             eprintln!("exported int8 model: {} bytes -> {}", qb.len(), out.display());
         }
@@ -333,6 +405,12 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Forward { problem: ForwardProblem::Mogi { input, output, stations } } => {
             forward_mogi(&input, &output, stations.as_deref())?;
         }
+        Cmd::Forward { problem: ForwardProblem::Rtm { input, output, geometry, tables } } => {
+            rtm_cli::forward(&input, &output, tables.as_deref(), &geometry)?;
+        }
+        Cmd::Lai { model, data_dir, json } => {
+            rtm_cli::lai(&model, data_dir.as_deref(), json.as_deref())?;
+        }
         Cmd::Synth { scenario, seed, out } => {
             let sc = synth::Scenario::parse(&scenario)?;
             let s = synth::generate(sc, seed);
@@ -340,9 +418,12 @@ fn run(cli: Cli) -> Result<()> {
             std::fs::write(out.join("truth.json"), serde_json::to_string_pretty(&s.truth)?)?;
             eprintln!("wrote synthetic dataset ({}) -> {}", s.data.source, out.display());
         }
-        Cmd::Reproduce { problem, data_dir, seeds, epochs, json } => {
+        Cmd::Reproduce { problem, data_dir, tables, variants, seeds, epochs, json } => {
+            if problem == "rtm" {
+                return rtm_cli::reproduce(data_dir.as_deref(), tables.as_deref(), &seeds, epochs, &variants, json.as_deref());
+            }
             if problem != "mogi" {
-                bail!("reproduce {problem}: expected `mogi`");
+                bail!("reproduce {problem}: expected `mogi` or `rtm`");
             }
             let data = load_gnss(data_dir.as_deref())?;
             let cfg = TrainConfig { epochs, ..TrainConfig::gnss() };
