@@ -190,7 +190,10 @@ impl<const N: usize> Real for Dual<N> {
         for (i, slot) in d.iter_mut().enumerate() {
             *slot = (x.v * self.d[i] - self.v * x.d[i]) / r2;
         }
-        Dual { v: libm::atan2(self.v, x.v), d }
+        Dual {
+            v: libm::atan2(self.v, x.v),
+            d,
+        }
     }
     #[inline]
     fn powf(self, e: Self) -> Self {
@@ -200,7 +203,11 @@ impl<const N: usize> Real for Dual<N> {
     #[inline]
     fn powi(self, n: i32) -> Self {
         let p = libm::pow(self.v, n as f64);
-        let dp = if n == 0 { 0.0 } else { n as f64 * libm::pow(self.v, (n - 1) as f64) };
+        let dp = if n == 0 {
+            0.0
+        } else {
+            n as f64 * libm::pow(self.v, (n - 1) as f64)
+        };
         self.chain(p, dp)
     }
     #[inline]
@@ -230,7 +237,11 @@ mod tests {
         let h = 1e-6 * (1.0 + libm::fabs(x));
         let fd = (g(x + h) - g(x - h)) / (2.0 * h);
         assert!((d.v - g(x)).abs() < 1e-12 * (1.0 + g(x).abs()));
-        assert!((d.d[0] - fd).abs() < 1e-6 * (1.0 + fd.abs()), "x={x}: {} vs {fd}", d.d[0]);
+        assert!(
+            (d.d[0] - fd).abs() < 1e-6 * (1.0 + fd.abs()),
+            "x={x}: {} vs {fd}",
+            d.d[0]
+        );
     }
 
     #[test]

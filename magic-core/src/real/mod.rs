@@ -15,7 +15,7 @@ mod dual;
 mod e1;
 
 pub use dual::Dual;
-pub use e1::{e1_f64, E1_MAX_REL_ERROR};
+pub use e1::{e1_f64, e1_with_exp, E1_MAX_REL_ERROR};
 
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
