@@ -80,7 +80,10 @@ impl Effect<'_> {
 
     /// Whether the effect needs the observation's date.
     pub fn needs_time(&self) -> bool {
-        matches!(self, Effect::Seasonal { .. } | Effect::Step { .. } | Effect::Drift { .. })
+        matches!(
+            self,
+            Effect::Seasonal { .. } | Effect::Step { .. } | Effect::Drift { .. }
+        )
     }
 
     /// The family name used in reports.
@@ -102,29 +105,56 @@ impl Effect<'_> {
         match *self {
             Effect::CommonMode => Ok(()),
             Effect::Elevation { z_ref_km } if finite(z_ref_km) => Ok(()),
-            Effect::SecondSource { x_km, y_km, depth_km } if finite(x_km) && finite(y_km) && depth_km > 0.0 => Ok(()),
-            Effect::Seasonal { coef } if coef.0.len() == 16 * n_obs && coef.iter().all(finite) => Ok(()),
-            Effect::Step { station, epoch_day, offset_mm }
-                if (station as usize) < n_stations && finite(epoch_day) && offset_mm.iter().all(|v| v.is_finite()) =>
+            Effect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            } if finite(x_km) && finite(y_km) && depth_km > 0.0 => Ok(()),
+            Effect::Seasonal { coef } if coef.0.len() == 16 * n_obs && coef.iter().all(finite) => {
+                Ok(())
+            }
+            Effect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            } if (station as usize) < n_stations
+                && finite(epoch_day)
+                && offset_mm.iter().all(|v| v.is_finite()) =>
             {
                 Ok(())
             }
-            Effect::Drift { t0_day, rate } if finite(t0_day) && rate.0.len() == 4 * n_obs && rate.iter().all(finite) => {
+            Effect::Drift { t0_day, rate }
+                if finite(t0_day) && rate.0.len() == 4 * n_obs && rate.iter().all(finite) =>
+            {
                 Ok(())
             }
-            _ => Err(Error::InvalidModel("effect parameters invalid or sized for another network")),
+            _ => Err(Error::InvalidModel(
+                "effect parameters invalid or sized for another network",
+            )),
         }
     }
 
     /// Adds the effect to `out` (uₑ ×S, uₙ ×S, uᵥ ×S in mm). `latent` holds this effect's latent
     /// variables; `t_day` the date (needed by fitted effects).
-    pub fn apply<R: Real>(&self, stations: &[Station], latent: &[R], t_day: f64, out: &mut [R]) -> Result<(), Error> {
+    pub fn apply<R: Real>(
+        &self,
+        stations: &[Station],
+        latent: &[R],
+        t_day: f64,
+        out: &mut [R],
+    ) -> Result<(), Error> {
         let s = stations.len();
         if out.len() != 3 * s || latent.len() != self.n_latent() {
-            return Err(Error::SizeMismatch { what: "effect inputs", expected: 3 * s, found: out.len() });
+            return Err(Error::SizeMismatch {
+                what: "effect inputs",
+                expected: 3 * s,
+                found: out.len(),
+            });
         }
         if self.needs_time() && !t_day.is_finite() {
-            return Err(Error::OutOfRange { what: "date (the model has time-dependent effects)" });
+            return Err(Error::OutOfRange {
+                what: "date (the model has time-dependent effects)",
+            });
         }
         match *self {
             Effect::CommonMode => {
@@ -139,8 +169,17 @@ impl Effect<'_> {
                     out[2 * s + i] += latent[0] * R::c(st.z_km - z_ref_km as f64);
                 }
             }
-            Effect::SecondSource { x_km, y_km, depth_km } => {
-                let p = [R::c(x_km as f64), R::c(y_km as f64), R::c(depth_km as f64), latent[0]];
+            Effect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            } => {
+                let p = [
+                    R::c(x_km as f64),
+                    R::c(y_km as f64),
+                    R::c(depth_km as f64),
+                    latent[0],
+                ];
                 for (i, st) in stations.iter().enumerate() {
                     let u = mogi::displacement(st, &p);
                     for k in 0..3 {
@@ -150,7 +189,12 @@ impl Effect<'_> {
             }
             Effect::Seasonal { coef } => {
                 let w = TWO_PI * t_day / YEAR_DAYS;
-                let basis = [libm::sin(w), libm::cos(w), libm::sin(2.0 * w), libm::cos(2.0 * w)];
+                let basis = [
+                    libm::sin(w),
+                    libm::cos(w),
+                    libm::sin(2.0 * w),
+                    libm::cos(2.0 * w),
+                ];
                 for (c, o) in out.iter_mut().enumerate() {
                     let mut v = 0.0;
                     for (j, b) in basis.iter().enumerate() {
@@ -159,7 +203,11 @@ impl Effect<'_> {
                     *o += R::c(v);
                 }
             }
-            Effect::Step { station, epoch_day, offset_mm } => {
+            Effect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            } => {
                 if t_day >= epoch_day as f64 {
                     let i = station as usize;
                     for k in 0..3 {
@@ -190,7 +238,11 @@ pub fn mogi_with_effects<R: Real>(
     let p: [R; mogi::N_PARAMS] = params
         .get(..mogi::N_PARAMS)
         .and_then(|s| s.try_into().ok())
-        .ok_or(Error::SizeMismatch { what: "mogi parameters", expected: mogi::N_PARAMS, found: params.len() })?;
+        .ok_or(Error::SizeMismatch {
+            what: "mogi parameters",
+            expected: mogi::N_PARAMS,
+            found: params.len(),
+        })?;
     mogi::field(stations, &p, out)?;
     let mut k = mogi::N_PARAMS;
     for e in effects {
@@ -211,12 +263,24 @@ mod tests {
     use super::*;
     use crate::Dual;
 
-    const NET: [Station; 2] = [Station { x_km: 1.0, y_km: 2.0, z_km: 0.3 }, Station { x_km: -3.0, y_km: 0.5, z_km: 0.6 }];
+    const NET: [Station; 2] = [
+        Station {
+            x_km: 1.0,
+            y_km: 2.0,
+            z_km: 0.3,
+        },
+        Station {
+            x_km: -3.0,
+            y_km: 0.5,
+            z_km: 0.6,
+        },
+    ];
 
     #[test]
     fn latent_effects_are_linear_with_exact_derivatives() {
         let effects = [Effect::CommonMode, Effect::Elevation { z_ref_km: 0.45 }];
-        let p: [Dual<8>; 8] = core::array::from_fn(|i| Dual::var([0.5, 0.1, 6.0, 1.0, 2.0, -1.0, 3.0, 10.0][i], i));
+        let p: [Dual<8>; 8] =
+            core::array::from_fn(|i| Dual::var([0.5, 0.1, 6.0, 1.0, 2.0, -1.0, 3.0, 10.0][i], i));
         let mut out = [Dual::<8>::c(0.0); 6];
         mogi_with_effects(&NET, &effects, &p, f64::NAN, &mut out).unwrap();
         // ∂u_E(station 0)/∂t_E = 1, ∂u_U(station 1)/∂k = z − z_ref = 0.15
@@ -227,15 +291,28 @@ mod tests {
     #[test]
     fn time_effects_need_a_date() {
         let rate = [0u8; 24];
-        let e = Effect::Drift { t0_day: 0.0, rate: LeF32(&rate) };
+        let e = Effect::Drift {
+            t0_day: 0.0,
+            rate: LeF32(&rate),
+        };
         let mut out = [0.0f64; 6];
         assert!(e.apply(&NET, &[], f64::NAN, &mut out).is_err());
         assert!(e.apply(&NET, &[], 10.0, &mut out).is_ok());
-        let step = Effect::Step { station: 1, epoch_day: 100.0, offset_mm: [1.0, 2.0, 3.0] };
+        let step = Effect::Step {
+            station: 1,
+            epoch_day: 100.0,
+            offset_mm: [1.0, 2.0, 3.0],
+        };
         step.apply(&NET, &[], 99.0, &mut out).unwrap();
         assert_eq!(out, [0.0; 6]);
         step.apply(&NET, &[], 100.0, &mut out).unwrap();
         assert_eq!(out, [0.0, 1.0, 0.0, 2.0, 0.0, 3.0]);
-        assert!(Effect::Step { station: 2, epoch_day: 0.0, offset_mm: [0.0; 3] }.validate(2).is_err());
+        assert!(Effect::Step {
+            station: 2,
+            epoch_day: 0.0,
+            offset_mm: [0.0; 3]
+        }
+        .validate(2)
+        .is_err());
     }
 }

@@ -70,12 +70,19 @@ impl fmt::Display for Error {
         match *self {
             Error::NonFinite { what, index } => write!(f, "{what}[{index}] is not a finite number"),
             Error::OutOfRange { what } => write!(f, "{what} is out of range"),
-            Error::SizeMismatch { what, expected, found } => {
+            Error::SizeMismatch {
+                what,
+                expected,
+                found,
+            } => {
                 write!(f, "{what}: expected {expected}, found {found}")
             }
             Error::BadMagic => write!(f, "not a magic model file (bad magic bytes)"),
             Error::UnsupportedVersion { found, supported } => {
-                write!(f, "model format version {found} is not supported (this build reads {supported})")
+                write!(
+                    f,
+                    "model format version {found} is not supported (this build reads {supported})"
+                )
             }
             Error::WrongProblem => write!(f, "model is for a different problem kind"),
             Error::CrcMismatch { stored, computed } => write!(

@@ -63,13 +63,18 @@ pub fn parse_obs(line: &str, out: &mut [f32]) -> Result<(), LineError> {
     let mut n = 0usize;
     for (i, field) in line.split(',').enumerate() {
         if i >= out.len() {
-            return Err(LineError::FieldCount { expected: out.len(), found: i + 1 });
+            return Err(LineError::FieldCount {
+                expected: out.len(),
+                found: i + 1,
+            });
         }
         let t = field.trim();
         out[i] = if t.is_empty() || t.eq_ignore_ascii_case("nan") {
             f32::NAN
         } else {
-            let v: f32 = t.parse().map_err(|_| LineError::NotANumber { field: i + 1 })?;
+            let v: f32 = t
+                .parse()
+                .map_err(|_| LineError::NotANumber { field: i + 1 })?;
             if !v.is_finite() || (v as f64).abs() > crate::invert::MAX_ABS_OBS {
                 return Err(LineError::OutOfRange { field: i + 1 });
             }
@@ -78,7 +83,10 @@ pub fn parse_obs(line: &str, out: &mut [f32]) -> Result<(), LineError> {
         n = i + 1;
     }
     if n != out.len() {
-        return Err(LineError::FieldCount { expected: out.len(), found: n });
+        return Err(LineError::FieldCount {
+            expected: out.len(),
+            found: n,
+        });
     }
     Ok(())
 }
@@ -97,10 +105,16 @@ pub fn parse_record(line: &str, with_date: bool, out: &mut [f32]) -> Result<f64,
         return parse_obs(line, out).map(|_| f64::NAN);
     }
     let line = line.trim_end_matches(['\r', '\n']);
-    let (date, rest) = line.split_once(',').ok_or(LineError::FieldCount { expected: out.len() + 1, found: 1 })?;
+    let (date, rest) = line.split_once(',').ok_or(LineError::FieldCount {
+        expected: out.len() + 1,
+        found: 1,
+    })?;
     let day = crate::time::parse_date(date).ok_or(LineError::BadDate)?;
     parse_obs(rest, out).map_err(|e| match e {
-        LineError::FieldCount { expected, found } => LineError::FieldCount { expected: expected + 1, found: found + 1 },
+        LineError::FieldCount { expected, found } => LineError::FieldCount {
+            expected: expected + 1,
+            found: found + 1,
+        },
         LineError::NotANumber { field } => LineError::NotANumber { field: field + 1 },
         LineError::OutOfRange { field } => LineError::OutOfRange { field: field + 1 },
         other => other,

@@ -29,7 +29,8 @@ pub const N_PARAMS: usize = 4;
 pub const PARAM_NAMES: [&str; N_PARAMS] = ["x_km", "y_km", "depth_km", "dv_1e6m3"];
 
 /// The paper's bounds (Table 2): min and max of x, y, depth, ΔV.
-pub const PAPER_BOUNDS: [[f64; 2]; N_PARAMS] = [[-9.33, 14.35], [-5.80, 7.62], [2.0, 20.0], [-10.0, 10.0]];
+pub const PAPER_BOUNDS: [[f64; 2]; N_PARAMS] =
+    [[-9.33, 14.35], [-5.80, 7.62], [2.0, 20.0], [-10.0, 10.0]];
 
 /// A GNSS station in local coordinates (km east, km north, km elevation).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -69,10 +70,16 @@ pub fn displacement<R: Real>(station: &Station, p: &[R; N_PARAMS]) -> [R; 3] {
 pub fn field<R: Real>(stations: &[Station], p: &[R; N_PARAMS], out: &mut [R]) -> Result<(), Error> {
     let s = stations.len();
     if out.len() != 3 * s {
-        return Err(Error::SizeMismatch { what: "mogi output", expected: 3 * s, found: out.len() });
+        return Err(Error::SizeMismatch {
+            what: "mogi output",
+            expected: 3 * s,
+            found: out.len(),
+        });
     }
     if p[2].value() <= 0.0 || !p[2].value().is_finite() {
-        return Err(Error::OutOfRange { what: "source depth" });
+        return Err(Error::OutOfRange {
+            what: "source depth",
+        });
     }
     for (i, st) in stations.iter().enumerate() {
         let u = displacement(st, p);
@@ -93,13 +100,23 @@ pub fn field_jacobian(
 ) -> Result<(), Error> {
     let s = stations.len();
     if out.len() != 3 * s {
-        return Err(Error::SizeMismatch { what: "mogi output", expected: 3 * s, found: out.len() });
+        return Err(Error::SizeMismatch {
+            what: "mogi output",
+            expected: 3 * s,
+            found: out.len(),
+        });
     }
     if jac.len() != 3 * s {
-        return Err(Error::SizeMismatch { what: "mogi jacobian", expected: 3 * s, found: jac.len() });
+        return Err(Error::SizeMismatch {
+            what: "mogi jacobian",
+            expected: 3 * s,
+            found: jac.len(),
+        });
     }
     if p[2] <= 0.0 || !p[2].is_finite() {
-        return Err(Error::OutOfRange { what: "source depth" });
+        return Err(Error::OutOfRange {
+            what: "source depth",
+        });
     }
     let pd: [Dual<N_PARAMS>; N_PARAMS] = core::array::from_fn(|j| Dual::var(p[j], j));
     for (i, st) in stations.iter().enumerate() {
@@ -117,9 +134,21 @@ mod tests {
     use super::*;
 
     const NET: [Station; 3] = [
-        Station { x_km: -4.2, y_km: 6.2, z_km: 0.35 },
-        Station { x_km: 10.7, y_km: 0.5, z_km: 0.46 },
-        Station { x_km: 2.0, y_km: 1.2, z_km: 0.49 },
+        Station {
+            x_km: -4.2,
+            y_km: 6.2,
+            z_km: 0.35,
+        },
+        Station {
+            x_km: 10.7,
+            y_km: 0.5,
+            z_km: 0.46,
+        },
+        Station {
+            x_km: 2.0,
+            y_km: 1.2,
+            z_km: 0.49,
+        },
     ];
 
     #[test]
@@ -139,14 +168,29 @@ mod tests {
             for c in 0..9 {
                 let fd = (fa[c] - fb[c]) / (2.0 * h);
                 let scale = fd.abs().max(1e-3);
-                assert!((jac[c][j] - fd).abs() / scale < 1e-6, "c{c} p{j}: {} vs {fd}", jac[c][j]);
+                assert!(
+                    (jac[c][j] - fd).abs() / scale < 1e-6,
+                    "c{c} p{j}: {} vs {fd}",
+                    jac[c][j]
+                );
             }
         }
     }
 
     #[test]
     fn radial_symmetry_and_linearity_in_volume() {
-        let st = [Station { x_km: 3.0, y_km: 4.0, z_km: 0.0 }, Station { x_km: -3.0, y_km: -4.0, z_km: 0.0 }];
+        let st = [
+            Station {
+                x_km: 3.0,
+                y_km: 4.0,
+                z_km: 0.0,
+            },
+            Station {
+                x_km: -3.0,
+                y_km: -4.0,
+                z_km: 0.0,
+            },
+        ];
         let mut u = [0.0; 6];
         field(&st, &[0.0, 0.0, 5.0, 2.0], &mut u).unwrap();
         assert!((u[0] + u[1]).abs() < 1e-12 && (u[2] + u[3]).abs() < 1e-12);
@@ -161,9 +205,15 @@ mod tests {
     #[test]
     fn rejects_bad_sizes_and_depth() {
         let mut u = [0.0; 5];
-        assert!(matches!(field(&NET, &[0.0, 0.0, 5.0, 1.0], &mut u), Err(Error::SizeMismatch { .. })));
+        assert!(matches!(
+            field(&NET, &[0.0, 0.0, 5.0, 1.0], &mut u),
+            Err(Error::SizeMismatch { .. })
+        ));
         let mut u = [0.0; 9];
-        assert!(matches!(field(&NET, &[0.0, 0.0, 0.0, 1.0], &mut u), Err(Error::OutOfRange { .. })));
+        assert!(matches!(
+            field(&NET, &[0.0, 0.0, 0.0, 1.0], &mut u),
+            Err(Error::OutOfRange { .. })
+        ));
         assert!(field(&NET, &[0.0, 0.0, f64::NAN, 1.0], &mut u).is_err());
     }
 }
