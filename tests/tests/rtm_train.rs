@@ -1,0 +1,278 @@
+//! The forest-spectra inversion end to end: RTM model files (f32 table rows, round trip against
+//! the f64 tables, corruption and inconsistency), a short training run of B, and
+//! `magic forward rtm` against the oracle.
+//!
+//! Data are found through `MAGIC_DATA` or `../shared/data` next to the workspace; without them the
+//! tests print a notice and pass.
+
+use magic_core::model_file::{Model, Problem};
+use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
+use magic_core::{invert, Error, Variant, Workspace};
+use magic_train::data::rtm_tables::{RtmTables, S2_DATA_BANDS};
+use magic_train::data::s2::S2Data;
+use magic_train::rtm_pipeline::{train_rtm, RtmSetup, RtmVariant};
+use magic_train::train::TrainConfig;
+use magic_train::OwnedModel;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+fn data_dir() -> Option<PathBuf> {
+    let dir = match std::env::var_os("MAGIC_DATA") {
+        Some(d) => PathBuf::from(d),
+        None => PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")),
+    };
+    if dir.join("rtm/prospect_d_coefficients.csv").exists() && dir.join("s2/train.csv").exists() {
+        Some(dir)
+    } else {
+        eprintln!(
+            "notice: RTM/S2 data not found at {} (set MAGIC_DATA); skipping",
+            dir.display()
+        );
+        None
+    }
+}
+
+fn setup() -> Option<&'static RtmSetup> {
+    static S: OnceLock<Option<RtmSetup>> = OnceLock::new();
+    S.get_or_init(|| {
+        let d = data_dir()?;
+        Some(RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap())
+    })
+    .as_ref()
+}
+
+/// A short training run of B (few hundred spectra, 2 epochs), shared by the tests.
+fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
+    static M: OnceLock<Option<(OwnedModel, Vec<u8>)>> = OnceLock::new();
+    M.get_or_init(|| {
+        let s = setup()?;
+        let cfg = TrainConfig {
+            epochs: 2,
+            progress: false,
+            ..TrainConfig::s2()
+        };
+        let valid = s.data.valid.head(200);
+        let (model, log) =
+            train_rtm(s, &s.data.train.head(300), &valid, RtmVariant::B, &cfg, 7).unwrap();
+        assert_eq!(log.epochs, 2);
+        assert!(
+            log.best_valid.is_finite() && log.best_valid < 5.0,
+            "valid MSE {}",
+            log.best_valid
+        );
+        let bytes = model.encode().unwrap();
+        Some((model, bytes))
+    })
+    .as_ref()
+}
+
+fn physical(data: &S2Data, row: &[f32]) -> Vec<f32> {
+    row.iter()
+        .enumerate()
+        .map(|(c, v)| (*v as f64 * data.scale[c] + data.mean[c]) as f32)
+        .collect()
+}
+
+#[test]
+fn short_training_run_of_b_gives_a_valid_small_model() {
+    let Some((model, bytes)) = trained_b() else {
+        return;
+    };
+    assert_eq!(model.variant, Variant::B);
+    assert!(
+        bytes.len() <= 256 * 1024,
+        "RTM model is {} bytes",
+        bytes.len()
+    );
+    let m = Model::decode(bytes).unwrap();
+    assert_eq!(m.n_obs(), 11);
+    assert_eq!(m.n_params(), N_LEARNED);
+    let s = setup().unwrap();
+    let mut ws = Workspace::default();
+    for row in s.data.test.rows.x.iter().take(50) {
+        let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
+        // 7 learned variables, then cd and h.
+        assert_eq!(inv.n_params, N_LEARNED + 2);
+        for (j, b) in m.bounds.iter().enumerate() {
+            assert!(inv.params[j] >= b[0] as f64 - 1e-6 && inv.params[j] <= b[1] as f64 + 1e-6);
+        }
+        let (cd, h) = (inv.params[7], inv.params[8]);
+        let want_cd = 2.0 * (inv.params[6] * 1e4 / (std::f64::consts::PI * 500.0)).sqrt();
+        assert!((cd - want_cd).abs() < 1e-9 && (h - (2.117 + 0.507 * cd.ln()).exp()).abs() < 1e-9);
+        assert!(inv.recon[..11]
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0 && *v < 1.0));
+    }
+}
+
+#[test]
+fn model_file_round_trip_matches_the_f64_tables() {
+    let Some((_, bytes)) = trained_b() else {
+        return;
+    };
+    let d = data_dir().unwrap();
+    let tables = RtmTables::read(&d.join("rtm")).unwrap();
+    let full = tables.inform().unwrap();
+    let s = setup().unwrap();
+    let m = Model::decode(bytes).unwrap();
+    // Decode → encode again gives the same bytes.
+    assert_eq!(&OwnedModel::from_model(&m).encode().unwrap(), bytes);
+    let mut ws = Workspace::default();
+    let mut worst = 0f64;
+    for row in s.data.test.rows.x.iter().step_by(37).take(100) {
+        let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
+        let z: [f64; N_LEARNED] = inv.params[..N_LEARNED].try_into().unwrap();
+        let y = full
+            .forward_learned(&z, &Fixed::default(), Geometry::Reference)
+            .unwrap();
+        for (k, &b) in S2_DATA_BANDS.iter().enumerate() {
+            worst = worst.max((inv.recon[k] - y[b]).abs());
+        }
+    }
+    assert!(worst < 1e-4, "f32 table rows vs f64 tables: {worst}");
+    // f32 physics on the board's path agrees too.
+    let row = physical(&s.data, &s.data.test.rows.x[0]);
+    let a = invert::<f64>(&m, &row, &mut ws).unwrap();
+    let b = invert::<f32>(&m, &row, &mut ws).unwrap();
+    for k in 0..11 {
+        assert!(
+            (a.recon[k] - b.recon[k] as f64).abs() < 1e-4,
+            "band {k}: {} vs {}",
+            a.recon[k],
+            b.recon[k]
+        );
+    }
+}
+
+#[test]
+fn corrupt_and_inconsistent_rtm_files_are_errors() {
+    let Some((model, bytes)) = trained_b() else {
+        return;
+    };
+    // Flipped bits anywhere (CRC).
+    for i in (0..bytes.len()).step_by(bytes.len() / 97) {
+        let mut c = bytes.clone();
+        c[i] ^= 0x10;
+        assert!(Model::decode(&c).is_err(), "flip at {i} accepted");
+    }
+    // Truncated.
+    assert_eq!(
+        Model::decode(&bytes[..bytes.len() - 1]).unwrap_err(),
+        Error::Truncated
+    );
+    // An RTM model where a Mogi model is expected.
+    let m = Model::decode(bytes).unwrap();
+    assert_eq!(m.stations().unwrap_err(), Error::WrongProblem);
+
+    let with = |f: &dyn Fn(&mut OwnedModel)| {
+        let mut o = model.clone();
+        f(&mut o);
+        o.encode().unwrap_err().to_string()
+    };
+    let Problem::Rtm {
+        spectral,
+        weights,
+        lidf_beta,
+        ..
+    } = model.problem.clone()
+    else {
+        panic!("not RTM")
+    };
+    // The band mask does not match the 11 observations.
+    let e = with(&|o| {
+        if let Problem::Rtm { bands, .. } = &mut o.problem {
+            *bands &= !(1 << 12);
+        }
+    });
+    assert!(e.contains("observations"), "{e}");
+    // A band beyond B12.
+    let e = with(&|o| {
+        if let Problem::Rtm { bands, .. } = &mut o.problem {
+            *bands |= 1 << 14;
+        }
+    });
+    assert!(e.contains("band"), "{e}");
+    // Table rows cut short / weights that do not match the rows.
+    let e = with(&|o| {
+        if let Problem::Rtm { spectral: s, .. } = &mut o.problem {
+            *s = magic_core::quant::LeF32(&spectral.0[..spectral.0.len() - 4]);
+        }
+    });
+    assert!(e.contains("spectral"), "{e}");
+    let e = with(&|o| {
+        if let Problem::Rtm { weights: w, .. } = &mut o.problem {
+            *w = magic_core::quant::LeF32(&weights.0[..weights.0.len() - 44]);
+        }
+    });
+    assert!(e.contains("weights"), "{e}");
+    let e = with(&|o| {
+        if let Problem::Rtm { lidf_beta: l, .. } = &mut o.problem {
+            *l = magic_core::quant::LeF32(&lidf_beta.0[..12 * 4]);
+        }
+    });
+    assert!(e.contains("lidf"), "{e}");
+    // Fixed inputs the forward model rejects: a beta row that does not exist, sun at the horizon.
+    let e = with(&|o| {
+        if let Problem::Rtm { fixed, .. } = &mut o.problem {
+            fixed.lidf = 9.0;
+        }
+    });
+    assert!(e.contains("LIDF"), "{e}");
+    let e = with(&|o| {
+        if let Problem::Rtm { fixed, .. } = &mut o.problem {
+            fixed.tts = 95.0;
+        }
+    });
+    assert!(e.contains("tts"), "{e}");
+    // Bounds the physics cannot take; the wrong number of variables.
+    let e = with(&|o| o.bounds[4][0] = -1.0);
+    assert!(e.contains("positive"), "{e}");
+    let e = with(&|o| {
+        o.bounds.pop();
+    });
+    assert!(!e.is_empty());
+    // Declared effects are a Mogi notion.
+    let e = with(&|o| o.effects.push(magic_train::export::OwnedEffect::CommonMode));
+    assert!(e.contains("effects"), "{e}");
+}
+
+#[test]
+fn forward_rtm_command_matches_the_oracle() {
+    let Some(d) = data_dir() else { return };
+    let oracle = d.join("oracle/rtm_inform_s2_10k.csv");
+    let text = std::fs::read_to_string(&oracle).unwrap();
+    let head: String = text.lines().take(301).map(|l| format!("{l}\n")).collect();
+    let dir = std::env::temp_dir().join(format!("magic-rtm-forward-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
+    std::fs::write(&input, &head).unwrap();
+    magic_train::rtm_cli::forward(&input, &output, Some(&d.join("rtm")), "reference").unwrap();
+    let want = csv::Reader::from_path(&input)
+        .unwrap()
+        .into_records()
+        .map(|r| r.unwrap())
+        .collect::<Vec<_>>();
+    let mut rdr = csv::Reader::from_path(&output).unwrap();
+    let header = rdr.headers().unwrap().clone();
+    let want_header = csv::Reader::from_path(&input)
+        .unwrap()
+        .headers()
+        .unwrap()
+        .clone();
+    let got: Vec<_> = rdr.into_records().map(|r| r.unwrap()).collect();
+    assert_eq!(got.len(), 300);
+    let bands = magic_core::rtm::S2_BANDS;
+    assert_eq!(header.iter().skip(1).collect::<Vec<_>>(), bands.to_vec());
+    let mut worst = 0f64;
+    for (g, w) in got.iter().zip(&want) {
+        assert_eq!(&g[0], &w[0], "sample_id");
+        for (k, b) in bands.iter().enumerate() {
+            let c = want_header.iter().position(|h| h == *b).unwrap();
+            let a: f64 = g[k + 1].parse().unwrap();
+            let e: f64 = w[c].parse().unwrap();
+            worst = worst.max((a - e).abs());
+        }
+    }
+    assert!(worst < 1e-10, "forward rtm vs oracle: {worst}");
+    std::fs::remove_dir_all(&dir).ok();
+}
