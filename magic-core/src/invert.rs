@@ -8,9 +8,9 @@
 //! reconstruction; they are left out of the residual and reported in the flags and the station
 //! mask.
 
+use crate::effects::mogi_with_effects;
 use crate::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
 use crate::nn::{run, Scratch};
-use crate::effects::mogi_with_effects;
 use crate::rtm::inform::crown_from_cover;
 use crate::rtm::N_LEARNED;
 use crate::{Error, Real};
@@ -84,16 +84,29 @@ pub struct Workspace {
 /// println!("depth {} km", out.params[2]);
 /// # Ok::<(), magic_core::Error>(())
 /// ```
-pub fn invert<R: Real>(model: &Model<'_>, obs: &[f32], ws: &mut Workspace) -> Result<Inversion<R>, Error> {
+pub fn invert<R: Real>(
+    model: &Model<'_>,
+    obs: &[f32],
+    ws: &mut Workspace,
+) -> Result<Inversion<R>, Error> {
     invert_at(model, obs, f64::NAN, ws)
 }
 
 /// [`invert`] for an observation made on day `t_day` (days since 1970-01-01; NaN when unknown,
 /// which is an error only for models with time-dependent effects).
-pub fn invert_at<R: Real>(model: &Model<'_>, obs: &[f32], t_day: f64, ws: &mut Workspace) -> Result<Inversion<R>, Error> {
+pub fn invert_at<R: Real>(
+    model: &Model<'_>,
+    obs: &[f32],
+    t_day: f64,
+    ws: &mut Workspace,
+) -> Result<Inversion<R>, Error> {
     let n_obs = model.n_obs();
     if obs.len() != n_obs {
-        return Err(Error::SizeMismatch { what: "observations", expected: n_obs, found: obs.len() });
+        return Err(Error::SizeMismatch {
+            what: "observations",
+            expected: n_obs,
+            found: obs.len(),
+        });
     }
     let mut z = [0f32; MAX_OBS];
     let mut observed = 0usize;
@@ -102,17 +115,25 @@ pub fn invert_at<R: Real>(model: &Model<'_>, obs: &[f32], t_day: f64, ws: &mut W
             continue;
         }
         if x.is_infinite() {
-            return Err(Error::NonFinite { what: "observation", index: i });
+            return Err(Error::NonFinite {
+                what: "observation",
+                index: i,
+            });
         }
         if (x as f64).abs() > MAX_ABS_OBS {
-            return Err(Error::OutOfRange { what: "observation magnitude" });
+            return Err(Error::OutOfRange {
+                what: "observation magnitude",
+            });
         }
         z[i] = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
         observed += 1;
     }
     let n_params = model.n_params();
     if observed < n_params.max(1) {
-        return Err(Error::TooFewObservations { observed, needed: n_params.max(1) });
+        return Err(Error::TooFewObservations {
+            observed,
+            needed: n_params.max(1),
+        });
     }
     let mut flags = Flags::default();
     if observed < n_obs {
@@ -137,13 +158,20 @@ pub fn invert_at<R: Real>(model: &Model<'_>, obs: &[f32], t_day: f64, ws: &mut W
         for _ in 0..IMPUTE_PASSES {
             for i in 0..n_obs {
                 if obs[i].is_nan() {
-                    z[i] = ((pass.recon[i].value() as f32) - model.obs_mean.get(i)) / model.obs_scale.get(i);
+                    z[i] = ((pass.recon[i].value() as f32) - model.obs_mean.get(i))
+                        / model.obs_scale.get(i);
                 }
             }
             pass = Pass::run(model, &z[..n_obs], t_day, ws)?;
         }
     }
-    let Pass { mut params, unit, physics, recon, at_bound } = pass;
+    let Pass {
+        mut params,
+        unit,
+        physics,
+        recon,
+        at_bound,
+    } = pass;
     let mut n_params = n_params;
     if let (Problem::Rtm { fixed, .. }, Variant::B | Variant::C) = (&model.problem, model.variant) {
         let (cd, h) = crown_from_cover(params[6], R::c(fixed.sd));
@@ -214,7 +242,12 @@ impl<R: Real> Pass<R> {
                     *p = R::c(*u as f64);
                 }
                 let mut y = [0f32; MAX_OBS];
-                run(&model.decoder, &unit[..n_params], &mut y[..n_obs], &mut ws.nn)?;
+                run(
+                    &model.decoder,
+                    &unit[..n_params],
+                    &mut y[..n_obs],
+                    &mut ws.nn,
+                )?;
                 destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
             }
             Variant::B | Variant::C => {
@@ -227,7 +260,8 @@ impl<R: Real> Pass<R> {
                 if model.variant == Variant::C {
                     let mut fz = [0f32; MAX_OBS];
                     for i in 0..n_obs {
-                        fz[i] = ((physics[i].value() as f32) - model.obs_mean.get(i)) / model.obs_scale.get(i);
+                        fz[i] = ((physics[i].value() as f32) - model.obs_mean.get(i))
+                            / model.obs_scale.get(i);
                     }
                     let mut y = [0f32; MAX_OBS];
                     run(&model.decoder, &fz[..n_obs], &mut y[..n_obs], &mut ws.nn)?;
@@ -237,21 +271,41 @@ impl<R: Real> Pass<R> {
                 }
             }
         }
-        Ok(Pass { params, unit, physics, recon, at_bound })
+        Ok(Pass {
+            params,
+            unit,
+            physics,
+            recon,
+            at_bound,
+        })
     }
 }
 
 /// Runs the encoder on standardised observations, writing its outputs (sigmoid units for B/C).
-pub fn model_encoder(model: &Model<'_>, z: &[f32], out: &mut [f32], ws: &mut Workspace) -> Result<(), Error> {
+pub fn model_encoder(
+    model: &Model<'_>,
+    z: &[f32],
+    out: &mut [f32],
+    ws: &mut Workspace,
+) -> Result<(), Error> {
     run(&model.encoder, z, out, &mut ws.nn)
 }
 
 /// The model's forward model F with its declared effects: physical variables → observations in
 /// physical units, for an observation on day `t_day` (NaN if unknown).
-pub fn forward<R: Real>(model: &Model<'_>, params: &[R], t_day: f64, out: &mut [R]) -> Result<(), Error> {
+pub fn forward<R: Real>(
+    model: &Model<'_>,
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+) -> Result<(), Error> {
     match &model.problem {
-        Problem::Mogi { stations, .. } => mogi_with_effects(stations, &model.effects, params, t_day, out),
-        Problem::Rtm { fixed, geometry, .. } => {
+        Problem::Mogi { stations, .. } => {
+            mogi_with_effects(stations, &model.effects, params, t_day, out)
+        }
+        Problem::Rtm {
+            fixed, geometry, ..
+        } => {
             if model.variant == Variant::A {
                 return Err(Error::InvalidModel("variant A has no forward model"));
             }
@@ -260,7 +314,10 @@ pub fn forward<R: Real>(model: &Model<'_>, params: &[R], t_day: f64, out: &mut [
                 expected: N_LEARNED,
                 found: params.len(),
             })?;
-            model.problem.packed()?.forward_learned(&z, fixed, *geometry, out)
+            model
+                .problem
+                .packed()?
+                .forward_learned(&z, fixed, *geometry, out)
         }
     }
 }

@@ -17,7 +17,8 @@
 #![no_std]
 #![deny(missing_docs)]
 // `unsafe` is denied everywhere except the Armv7E-M int8 kernel (`quant::dsp`, feature `dsp`,
-// ARM only), whose inline assembly makes an inversion ~2.6x cheaper on a Cortex-M4F (measured).
+// ARM only), whose inline assembly cuts an inversion on a Cortex-M4F from 176 k to 99 k executed
+// instructions (measured under QEMU; see `quant::dsp`).
 #![deny(unsafe_code)]
 
 pub mod effects;

@@ -117,9 +117,13 @@ impl<'a> Problem<'a> {
     /// The forward model of an RTM problem over its packed rows.
     pub fn packed(&self) -> Result<Packed<LeF32<'a>>, Error> {
         match *self {
-            Problem::Rtm { bands, spectral, weights, lidf_beta, .. } => {
-                Packed::new(spectral, weights, lidf_beta, bands.count_ones() as usize)
-            }
+            Problem::Rtm {
+                bands,
+                spectral,
+                weights,
+                lidf_beta,
+                ..
+            } => Packed::new(spectral, weights, lidf_beta, bands.count_ones() as usize),
             _ => Err(Error::WrongProblem),
         }
     }
@@ -130,7 +134,10 @@ impl<'a> Problem<'a> {
         let mut out = [0usize; N_BANDS];
         let mut n = 0;
         if let Problem::Rtm { bands, .. } = self {
-            for (b, slot) in (0..N_BANDS).filter(|b| bands & (1 << b) != 0).zip(out.iter_mut()) {
+            for (b, slot) in (0..N_BANDS)
+                .filter(|b| bands & (1 << b) != 0)
+                .zip(out.iter_mut())
+            {
                 *slot = b;
                 n += 1;
             }
@@ -210,7 +217,10 @@ impl<'a> Model<'a> {
         }
         let version = u16::from_le_bytes([bytes[4], bytes[5]]);
         if version != VERSION {
-            return Err(Error::UnsupportedVersion { found: version, supported: VERSION });
+            return Err(Error::UnsupportedVersion {
+                found: version,
+                supported: VERSION,
+            });
         }
         let body_len = u32::from_le_bytes([bytes[6], bytes[7], bytes[8], bytes[9]]) as usize;
         let end = HEADER.checked_add(body_len).ok_or(Error::Truncated)?;
@@ -221,7 +231,8 @@ impl<'a> Model<'a> {
         if bytes.len() > total {
             return Err(Error::InvalidModel("trailing bytes after the CRC"));
         }
-        let stored = u32::from_le_bytes([bytes[end], bytes[end + 1], bytes[end + 2], bytes[end + 3]]);
+        let stored =
+            u32::from_le_bytes([bytes[end], bytes[end + 1], bytes[end + 2], bytes[end + 3]]);
         let computed = CRC.checksum(&bytes[..end]);
         if stored != computed {
             return Err(Error::CrcMismatch { stored, computed });
@@ -239,24 +250,38 @@ impl<'a> Model<'a> {
     pub fn validate(&self) -> Result<(), Error> {
         let n_obs = self.n_obs();
         if n_obs == 0 || n_obs > MAX_OBS || self.obs_mean.0.len() != 4 * n_obs {
-            return Err(Error::InvalidModel("observation count is zero, too large or not whole f32s"));
+            return Err(Error::InvalidModel(
+                "observation count is zero, too large or not whole f32s",
+            ));
         }
         if self.obs_scale.0.len() != self.obs_mean.0.len() {
-            return Err(Error::SizeMismatch { what: "obs_scale", expected: n_obs, found: self.obs_scale.len() });
+            return Err(Error::SizeMismatch {
+                what: "obs_scale",
+                expected: n_obs,
+                found: self.obs_scale.len(),
+            });
         }
         if !self.obs_mean.iter().all(f32::is_finite) {
             return Err(Error::InvalidModel("non-finite observation mean"));
         }
         if !self.obs_scale.iter().all(|s| s.is_finite() && s > 0.0) {
-            return Err(Error::InvalidModel("observation scale not positive and finite"));
+            return Err(Error::InvalidModel(
+                "observation scale not positive and finite",
+            ));
         }
         if !(self.residual_threshold.is_finite() && self.residual_threshold >= 0.0) {
-            return Err(Error::InvalidModel("residual threshold not finite and non-negative"));
+            return Err(Error::InvalidModel(
+                "residual threshold not finite and non-negative",
+            ));
         }
         let n_phys = match &self.problem {
             Problem::Mogi { stations, names } => {
                 if names.len() != stations.len() {
-                    return Err(Error::SizeMismatch { what: "station names", expected: stations.len(), found: names.len() });
+                    return Err(Error::SizeMismatch {
+                        what: "station names",
+                        expected: stations.len(),
+                        found: names.len(),
+                    });
                 }
                 if stations.is_empty() {
                     return Err(Error::InvalidModel("no stations"));
@@ -268,7 +293,10 @@ impl<'a> Model<'a> {
                         found: n_obs,
                     });
                 }
-                if !stations.iter().all(|s| s.x_km.is_finite() && s.y_km.is_finite() && s.z_km.is_finite()) {
+                if !stations
+                    .iter()
+                    .all(|s| s.x_km.is_finite() && s.y_km.is_finite() && s.z_km.is_finite())
+                {
                     return Err(Error::InvalidModel("non-finite station position"));
                 }
                 for e in &self.effects {
@@ -292,9 +320,26 @@ impl<'a> Model<'a> {
                     return Err(Error::InvalidModel("RTM models declare no effects"));
                 }
                 let f = fixed;
-                let all = [f.car, f.anth, f.cbrown, f.cp, f.cbc, f.type_lidf, f.lidf, f.hspot, f.psoil, f.tts, f.tto, f.psi, f.sd];
+                let all = [
+                    f.car,
+                    f.anth,
+                    f.cbrown,
+                    f.cp,
+                    f.cbc,
+                    f.type_lidf,
+                    f.lidf,
+                    f.hspot,
+                    f.psoil,
+                    f.tts,
+                    f.tto,
+                    f.psi,
+                    f.sd,
+                ];
                 if let Some(index) = all.iter().position(|v| !v.is_finite()) {
-                    return Err(Error::NonFinite { what: "RTM fixed input", index });
+                    return Err(Error::NonFinite {
+                        what: "RTM fixed input",
+                        index,
+                    });
                 }
                 if self.variant != Variant::A {
                     // The fixed inputs must be accepted by the forward model (angles, soil, LIDF
@@ -303,9 +348,16 @@ impl<'a> Model<'a> {
                     for (zi, b) in z.iter_mut().zip(self.bounds.iter()) {
                         *zi = 0.5 * (b[0] as f64 + b[1] as f64);
                     }
-                    if self.bounds.len() == N_LEARNED && self.bounds.iter().all(|b| b[0] > 0.0 && b[0] < b[1]) {
+                    if self.bounds.len() == N_LEARNED
+                        && self.bounds.iter().all(|b| b[0] > 0.0 && b[0] < b[1])
+                    {
                         let mut y = [0f64; N_BANDS];
-                        packed.forward_learned(&z, fixed, geometry_of(&self.problem), &mut y[..n_obs])?;
+                        packed.forward_learned(
+                            &z,
+                            fixed,
+                            geometry_of(&self.problem),
+                            &mut y[..n_obs],
+                        )?;
                     }
                 }
                 N_LEARNED
@@ -322,14 +374,27 @@ impl<'a> Model<'a> {
             }
             Variant::B | Variant::C => {
                 validate_chain(&self.encoder, n_obs, n_phys)?;
-                let head = self.encoder.last().ok_or(Error::InvalidModel("empty encoder"))?;
+                let head = self
+                    .encoder
+                    .last()
+                    .ok_or(Error::InvalidModel("empty encoder"))?;
                 if head.act != Activation::Sigmoid || head.is_int8() {
-                    return Err(Error::InvalidModel("encoder head must be an f32 sigmoid layer"));
+                    return Err(Error::InvalidModel(
+                        "encoder head must be an f32 sigmoid layer",
+                    ));
                 }
                 if self.bounds.len() != n_phys {
-                    return Err(Error::SizeMismatch { what: "bounds", expected: n_phys, found: self.bounds.len() });
+                    return Err(Error::SizeMismatch {
+                        what: "bounds",
+                        expected: n_phys,
+                        found: self.bounds.len(),
+                    });
                 }
-                if !self.bounds.iter().all(|b| b[0].is_finite() && b[1].is_finite() && b[0] < b[1]) {
+                if !self
+                    .bounds
+                    .iter()
+                    .all(|b| b[0].is_finite() && b[1].is_finite() && b[0] < b[1])
+                {
                     return Err(Error::InvalidModel("bounds must be finite with min < max"));
                 }
                 if let Problem::Mogi { .. } = self.problem {

@@ -89,11 +89,17 @@ impl Layer<'_> {
     pub fn validate(&self) -> Result<(), Error> {
         let (r, c) = (self.rows as usize, self.cols as usize);
         if r == 0 || c == 0 || r > MAX_WIDTH || c > MAX_WIDTH {
-            return Err(Error::InvalidModel("layer size is zero or wider than the compiled MAX_WIDTH"));
+            return Err(Error::InvalidModel(
+                "layer size is zero or wider than the compiled MAX_WIDTH",
+            ));
         }
         let len = |what, bytes: usize, n: usize| {
             if bytes != n {
-                Err(Error::SizeMismatch { what, expected: n, found: bytes })
+                Err(Error::SizeMismatch {
+                    what,
+                    expected: n,
+                    found: bytes,
+                })
             } else {
                 Ok(())
             }
@@ -106,7 +112,15 @@ impl Layer<'_> {
                     return Err(Error::InvalidModel("non-finite f32 weight"));
                 }
             }
-            Weights::Int8 { w, bias, w_scale, mult, shift, in_scale, out_scale } => {
+            Weights::Int8 {
+                w,
+                bias,
+                w_scale,
+                mult,
+                shift,
+                in_scale,
+                out_scale,
+            } => {
                 len("int8 layer weight bytes", w.len(), r * c)?;
                 len("int8 layer bias bytes", bias.0.len(), 4 * r)?;
                 len("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
@@ -114,13 +128,19 @@ impl Layer<'_> {
                 len("int8 layer shift bytes", shift.len(), r)?;
                 let ok_scale = |s: f32| s.is_finite() && s > 0.0;
                 if !ok_scale(in_scale) || !(out_scale.is_finite() && out_scale >= 0.0) {
-                    return Err(Error::InvalidModel("int8 activation scale not positive and finite"));
+                    return Err(Error::InvalidModel(
+                        "int8 activation scale not positive and finite",
+                    ));
                 }
                 if !w_scale.iter().all(ok_scale) {
-                    return Err(Error::InvalidModel("int8 weight scale not positive and finite"));
+                    return Err(Error::InvalidModel(
+                        "int8 weight scale not positive and finite",
+                    ));
                 }
                 if w.iter().any(|&b| b == 0x80) {
-                    return Err(Error::InvalidModel("int8 weight -128 (symmetric range is ±127)"));
+                    return Err(Error::InvalidModel(
+                        "int8 weight -128 (symmetric range is ±127)",
+                    ));
                 }
                 for &s in shift {
                     if !(-30..=30).contains(&(s as i8)) {
@@ -146,22 +166,42 @@ pub fn validate_chain(layers: &[Layer<'_>], input: usize, output: usize) -> Resu
     for (i, l) in layers.iter().enumerate() {
         l.validate()?;
         if l.cols as usize != width {
-            return Err(Error::SizeMismatch { what: "layer inputs", expected: width, found: l.cols as usize });
+            return Err(Error::SizeMismatch {
+                what: "layer inputs",
+                expected: width,
+                found: l.cols as usize,
+            });
         }
-        if let (Weights::Int8 { out_scale, .. }, Some(Layer { weights: Weights::Int8 { in_scale, .. }, .. })) =
-            (l.weights, layers.get(i + 1))
+        if let (
+            Weights::Int8 { out_scale, .. },
+            Some(Layer {
+                weights: Weights::Int8 { in_scale, .. },
+                ..
+            }),
+        ) = (l.weights, layers.get(i + 1))
         {
             if out_scale != *in_scale {
-                return Err(Error::InvalidModel("int8 layer output scale differs from next input scale"));
+                return Err(Error::InvalidModel(
+                    "int8 layer output scale differs from next input scale",
+                ));
             }
         }
-        if l.is_int8() && l.act == Activation::Sigmoid && layers.get(i + 1).is_some_and(|n| n.is_int8()) {
-            return Err(Error::InvalidModel("sigmoid between int8 layers is not supported"));
+        if l.is_int8()
+            && l.act == Activation::Sigmoid
+            && layers.get(i + 1).is_some_and(|n| n.is_int8())
+        {
+            return Err(Error::InvalidModel(
+                "sigmoid between int8 layers is not supported",
+            ));
         }
         width = l.rows as usize;
     }
     if width != output {
-        return Err(Error::SizeMismatch { what: "network outputs", expected: output, found: width });
+        return Err(Error::SizeMismatch {
+            what: "network outputs",
+            expected: output,
+            found: width,
+        });
     }
     Ok(())
 }
@@ -206,10 +246,19 @@ fn activate(x: f32, act: Activation) -> f32 {
 ///
 /// Layers must have passed [`validate_chain`]; sizes are checked again here (cheaply) so that a
 /// mistake returns an error instead of reading out of bounds.
-pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scratch) -> Result<(), Error> {
+pub fn run(
+    layers: &[Layer<'_>],
+    input: &[f32],
+    output: &mut [f32],
+    s: &mut Scratch,
+) -> Result<(), Error> {
     let n_in = input.len();
     if n_in > MAX_WIDTH {
-        return Err(Error::SizeMismatch { what: "network input", expected: MAX_WIDTH, found: n_in });
+        return Err(Error::SizeMismatch {
+            what: "network input",
+            expected: MAX_WIDTH,
+            found: n_in,
+        });
     }
     s.f[0][..n_in].copy_from_slice(input);
     // Which representation holds the current activations: f32 buffer `cur` or int8 buffer `cur`.
@@ -219,7 +268,11 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
     for (i, l) in layers.iter().enumerate() {
         let (rows, cols) = (l.rows as usize, l.cols as usize);
         if cols != width || rows > MAX_WIDTH {
-            return Err(Error::SizeMismatch { what: "layer inputs", expected: width, found: cols });
+            return Err(Error::SizeMismatch {
+                what: "layer inputs",
+                expected: width,
+                found: cols,
+            });
         }
         let next_int8 = layers.get(i + 1).is_some_and(|n| n.is_int8());
         let nxt = 1 - cur;
@@ -229,10 +282,18 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
                     return Err(Error::InvalidModel("f32 layer after int8 output"));
                 }
                 if w.0.len() < 4 * rows * cols {
-                    return Err(Error::SizeMismatch { what: "f32 layer weight bytes", expected: 4 * rows * cols, found: w.0.len() });
+                    return Err(Error::SizeMismatch {
+                        what: "f32 layer weight bytes",
+                        expected: 4 * rows * cols,
+                        found: w.0.len(),
+                    });
                 }
                 let (a, b) = s.f.split_at_mut(1);
-                let (src, dst) = if cur == 0 { (&a[0], &mut b[0]) } else { (&b[0], &mut a[0]) };
+                let (src, dst) = if cur == 0 {
+                    (&a[0], &mut b[0])
+                } else {
+                    (&b[0], &mut a[0])
+                };
                 for r in 0..rows {
                     let mut acc = bias.get(r);
                     let row = &w.0[4 * r * cols..4 * (r + 1) * cols];
@@ -242,7 +303,11 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
                     dst[r] = activate(acc, l.act);
                 }
                 if next_int8 {
-                    if let Some(Layer { weights: Weights::Int8 { in_scale, .. }, .. }) = layers.get(i + 1) {
+                    if let Some(Layer {
+                        weights: Weights::Int8 { in_scale, .. },
+                        ..
+                    }) = layers.get(i + 1)
+                    {
                         let inv = 1.0 / in_scale;
                         for r in 0..rows {
                             s.q[nxt][r] = quantize(s.f[nxt][r], inv);
@@ -251,12 +316,28 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
                     in_int8 = true;
                 }
             }
-            Weights::Int8 { w, bias, w_scale, mult, shift, in_scale, .. } => {
+            Weights::Int8 {
+                w,
+                bias,
+                w_scale,
+                mult,
+                shift,
+                in_scale,
+                ..
+            } => {
                 if w.len() < rows * cols {
-                    return Err(Error::SizeMismatch { what: "int8 layer weight bytes", expected: rows * cols, found: w.len() });
+                    return Err(Error::SizeMismatch {
+                        what: "int8 layer weight bytes",
+                        expected: rows * cols,
+                        found: w.len(),
+                    });
                 }
                 if next_int8 && shift.len() < rows {
-                    return Err(Error::SizeMismatch { what: "int8 layer shift bytes", expected: rows, found: shift.len() });
+                    return Err(Error::SizeMismatch {
+                        what: "int8 layer shift bytes",
+                        expected: rows,
+                        found: shift.len(),
+                    });
                 }
                 if !in_int8 {
                     let inv = 1.0 / in_scale;
@@ -295,7 +376,11 @@ pub fn run(layers: &[Layer<'_>], input: &[f32], output: &mut [f32], s: &mut Scra
         return Err(Error::InvalidModel("network ends in int8"));
     }
     if output.len() != width {
-        return Err(Error::SizeMismatch { what: "network output", expected: width, found: output.len() });
+        return Err(Error::SizeMismatch {
+            what: "network output",
+            expected: width,
+            found: output.len(),
+        });
     }
     output.copy_from_slice(&s.f[cur][..width]);
     Ok(())
@@ -310,10 +395,25 @@ mod tests {
         // Regression (fuzzing): `run` indexed weight and shift bytes without checking their
         // lengths, so a layer that skipped `validate` panicked instead of returning an error.
         let (w, b) = ([0u8; 4 * 3], [0u8; 4 * 2]);
-        let short_f32 = Layer { rows: 2, cols: 2, act: Activation::Linear, weights: Weights::F32 { w: LeF32(&w), bias: LeF32(&b) } };
+        let short_f32 = Layer {
+            rows: 2,
+            cols: 2,
+            act: Activation::Linear,
+            weights: Weights::F32 {
+                w: LeF32(&w),
+                bias: LeF32(&b),
+            },
+        };
         let mut out = [0f32; 2];
         let e = run(&[short_f32], &[1.0, 2.0], &mut out, &mut Scratch::default());
-        assert_eq!(e, Err(Error::SizeMismatch { what: "f32 layer weight bytes", expected: 16, found: 12 }));
+        assert_eq!(
+            e,
+            Err(Error::SizeMismatch {
+                what: "f32 layer weight bytes",
+                expected: 16,
+                found: 12
+            })
+        );
 
         let int8 = |w: &'static [u8], shift: &'static [u8]| Layer {
             rows: 2,
@@ -329,11 +429,45 @@ mod tests {
                 out_scale: 1.0,
             },
         };
-        let e = run(&[int8(&[1u8; 3], &[0u8; 2])], &[1.0, 2.0], &mut out, &mut Scratch::default());
-        assert!(matches!(e, Err(Error::SizeMismatch { what: "int8 layer weight bytes", .. })), "{e:?}");
-        let e = run(&[int8(&[1u8; 4], &[0u8; 1]), int8(&[1u8; 4], &[0u8; 2])], &[1.0, 2.0], &mut out, &mut Scratch::default());
-        assert!(matches!(e, Err(Error::SizeMismatch { what: "int8 layer shift bytes", .. })), "{e:?}");
+        let e = run(
+            &[int8(&[1u8; 3], &[0u8; 2])],
+            &[1.0, 2.0],
+            &mut out,
+            &mut Scratch::default(),
+        );
+        assert!(
+            matches!(
+                e,
+                Err(Error::SizeMismatch {
+                    what: "int8 layer weight bytes",
+                    ..
+                })
+            ),
+            "{e:?}"
+        );
+        let e = run(
+            &[int8(&[1u8; 4], &[0u8; 1]), int8(&[1u8; 4], &[0u8; 2])],
+            &[1.0, 2.0],
+            &mut out,
+            &mut Scratch::default(),
+        );
+        assert!(
+            matches!(
+                e,
+                Err(Error::SizeMismatch {
+                    what: "int8 layer shift bytes",
+                    ..
+                })
+            ),
+            "{e:?}"
+        );
         // The same layers with whole byte arrays run.
-        assert!(run(&[int8(&[1u8; 4], &[0u8; 2]), int8(&[1u8; 4], &[0u8; 2])], &[1.0, 2.0], &mut out, &mut Scratch::default()).is_ok());
+        assert!(run(
+            &[int8(&[1u8; 4], &[0u8; 2]), int8(&[1u8; 4], &[0u8; 2])],
+            &[1.0, 2.0],
+            &mut out,
+            &mut Scratch::default()
+        )
+        .is_ok());
     }
 }

@@ -44,7 +44,9 @@ impl<'a> LeF32<'a> {
     }
     /// Iterator over the elements.
     pub fn iter(&self) -> impl Iterator<Item = f32> + 'a {
-        self.0.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        self.0
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
     }
 }
 
@@ -204,7 +206,12 @@ pub fn dot_i8_packed_portable(w: &[u8], xp: &[u32]) -> i32 {
         // Words missing from `xp` stand for zero activations.
         let e = xp.get(2 * g).copied().unwrap_or(0);
         let o = xp.get(2 * g + 1).copied().unwrap_or(0);
-        let (w0, w1, w2, w3) = (b[0] as i8 as i32, b[1] as i8 as i32, b[2] as i8 as i32, b[3] as i8 as i32);
+        let (w0, w1, w2, w3) = (
+            b[0] as i8 as i32,
+            b[1] as i8 as i32,
+            b[2] as i8 as i32,
+            b[3] as i8 as i32,
+        );
         // SMLAD(SXTB16(w), e) then SMLAD(SXTB16(w, ROR 8), o)
         // Products of int8 values and pairs of them fit in i32; the running sum wraps as SMLAD's.
         acc = acc.wrapping_add(w0 * lane(e, false) + w2 * lane(e, true));
@@ -355,7 +362,10 @@ mod tests {
 
     /// The reference: a plain sum of products.
     fn naive(w: &[u8], x: &[i8]) -> i32 {
-        w.iter().zip(x).map(|(a, b)| (*a as i8 as i32) * (*b as i32)).sum()
+        w.iter()
+            .zip(x)
+            .map(|(a, b)| (*a as i8 as i32) * (*b as i32))
+            .sum()
     }
 
     proptest::proptest! {
@@ -382,7 +392,11 @@ mod tests {
             let x = vec![-127i8; n];
             let mut xp = [0u32; packed_words(crate::nn::MAX_WIDTH)];
             pack_i8_pairs(&x, &mut xp);
-            assert_eq!(dot_i8_packed_portable(&w, &xp), 127 * 127 * n as i32, "n {n}");
+            assert_eq!(
+                dot_i8_packed_portable(&w, &xp),
+                127 * 127 * n as i32,
+                "n {n}"
+            );
             assert_eq!(dot_i8(&w, &x), 127 * 127 * n as i32);
         }
         // Missing packed words stand for zero activations.
@@ -396,7 +410,11 @@ mod tests {
     fn dot_matches_naive() {
         let w: [u8; 5] = [1, 255, 127, 128, 3];
         let x: [i8; 5] = [4, 5, -6, 2, -7];
-        let naive: i32 = w.iter().zip(&x).map(|(a, b)| (*a as i8 as i32) * (*b as i32)).sum();
+        let naive: i32 = w
+            .iter()
+            .zip(&x)
+            .map(|(a, b)| (*a as i8 as i32) * (*b as i32))
+            .sum();
         assert_eq!(dot_i8(&w, &x), naive);
     }
 
@@ -405,12 +423,20 @@ mod tests {
         // Regression (fuzzing): shifts outside -30..=30 overflowed the bit shift, and slices far
         // longer than a layer overflowed the i32 sum (panics in builds with overflow checks).
         for shift in i8::MIN..=i8::MAX {
-            for (acc, m) in [(i32::MIN, i32::MIN), (i32::MAX, i32::MAX), (1, 1 << 30), (-5, -7)] {
+            for (acc, m) in [
+                (i32::MIN, i32::MIN),
+                (i32::MAX, i32::MAX),
+                (1, 1 << 30),
+                (-5, -7),
+            ] {
                 let q = requantize(acc, m, shift);
                 assert!((-127..=127).contains(&q));
             }
         }
-        assert_eq!(requantize(1000, 1 << 30, -31), requantize(1000, 1 << 30, -30));
+        assert_eq!(
+            requantize(1000, 1 << 30, -31),
+            requantize(1000, 1 << 30, -30)
+        );
         let n = 300_000;
         let (w, x) = (vec![0x81u8; n], vec![-127i8; n]);
         let want = (0..n).fold(0i32, |a, _| a.wrapping_add(127 * 127));
