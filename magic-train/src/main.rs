@@ -87,6 +87,21 @@ enum Cmd {
         #[arg(long)]
         standardized: bool,
     },
+    /// Build the firmware with a model and invert observations on it under QEMU.
+    Qemu {
+        /// Model file (int8, from `magic export`).
+        #[arg(long)]
+        model: PathBuf,
+        /// Observation CSV, as for `magic invert`.
+        #[arg(long)]
+        input: PathBuf,
+        /// Result CSV (same format as `magic invert`).
+        #[arg(long)]
+        output: PathBuf,
+        /// The input holds standardised values.
+        #[arg(long)]
+        standardized: bool,
+    },
     /// Evaluate a forward model.
     Forward {
         #[command(subcommand)]
@@ -169,6 +184,9 @@ enum Cmd {
         /// Latent effects fitted with the source, comma-separated (common_mode, elevation).
         #[arg(long, value_delimiter = ',')]
         effects: Vec<String>,
+        /// Start grid NX,NY,ND,KEEP: points over x, y, depth, and how many of the best are refined.
+        #[arg(long, default_value = "12,12,10,8")]
+        grid: String,
         /// Write the summaries as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -411,6 +429,26 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Lai { model, data_dir, json } => {
             rtm_cli::lai(&model, data_dir.as_deref(), json.as_deref())?;
         }
+        Cmd::Qemu { model, input, output, standardized } => {
+            let bytes = read_model(&model)?;
+            let m = decode(&model, &bytes)?;
+            let rows = records::read_obs(&input, &m, standardized)?;
+            report_row_errors(&rows);
+            let run = magic_train::demo_qemu::run_rows(&model, &m, &rows)?;
+            records::write_results(&output, &m, &rows, &run.results)?;
+            for (k, v) in &run.costs {
+                eprintln!("# {k} = {v}");
+            }
+            let host = records::invert_rows(&m, &rows);
+            let (worst, mismatched) = magic_train::demo_qemu::agreement(&m, &run.results, &host);
+            eprintln!(
+                "{} rows -> {}; largest difference from the host: {:.1e} of a variable's range; {} rows failed on one side only",
+                rows.len(),
+                output.display(),
+                worst.iter().copied().fold(0.0, f64::max),
+                mismatched
+            );
+        }
         Cmd::Synth { scenario, seed, out } => {
             let sc = synth::Scenario::parse(&scenario)?;
             let s = synth::generate(sc, seed);
@@ -442,9 +480,10 @@ fn run(cli: Cli) -> Result<()> {
                 std::fs::write(&p, serde_json::to_string_pretty(&rows)?).with_context(|| format!("{}: cannot write", p.display()))?;
             }
         }
-        Cmd::Classical { data_dir, split, effects, json, csv } => {
+        Cmd::Classical { data_dir, split, effects, grid, json, csv } => {
+            let grid = magic_train::classical::parse_grid(&grid)?;
             let data = load_gnss(data_dir.as_deref())?;
-            magic_train::classical::run(&data, &split, &effects, json.as_deref(), csv.as_deref())?;
+            magic_train::classical::run(&data, &split, &effects, &grid, json.as_deref(), csv.as_deref())?;
         }
         Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
             demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
