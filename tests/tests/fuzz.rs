@@ -286,7 +286,7 @@ fn crc32(data: &[u8]) -> u32 {
 }
 
 /// Rewrites the header's body length and the CRC so that decoding gets past both.
-fn reseal(b: &mut Vec<u8>, fix_len: bool) {
+fn reseal(b: &mut [u8], fix_len: bool) {
     if b.len() < 14 {
         return;
     }
