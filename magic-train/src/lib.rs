@@ -12,6 +12,7 @@ pub mod export;
 pub mod missing;
 pub mod nets;
 pub mod physics;
+pub mod plots;
 pub mod records;
 pub mod reproduce;
 pub mod rtm_cli;
