@@ -680,6 +680,14 @@ mod tests {
         },
     ];
 
+    /// Every fitted unknown within 1e-6 of the truth.
+    fn assert_recovered(f: &Fit, truth: &[f64]) {
+        assert_eq!(f.params().len(), truth.len());
+        for (j, (p, t)) in f.params().iter().zip(truth).enumerate() {
+            assert!((p - t).abs() < 1e-6, "p{j}: {p} vs {t}");
+        }
+    }
+
     fn scales() -> [f64; 36] {
         core::array::from_fn(|c| 1.0 + 0.25 * (c % 5) as f64)
     }
@@ -717,24 +725,10 @@ mod tests {
         )
         .unwrap();
         assert!(f.converged);
-        for j in 0..4 {
-            assert!(
-                (f.params[j] - truth[j]).abs() < 1e-6,
-                "p{j}: {} vs {}",
-                f.params[j],
-                truth[j]
-            );
-        }
+        assert_recovered(&f, &truth);
         assert!(f.cost < 1e-20, "cost {}", f.cost);
         let g = fit_grid(&pb, &y, f64::NAN, &Grid::default(), &Options::default()).unwrap();
-        for j in 0..4 {
-            assert!(
-                (g.params[j] - truth[j]).abs() < 1e-6,
-                "grid p{j}: {} vs {}",
-                g.params[j],
-                truth[j]
-            );
-        }
+        assert_recovered(&g, &truth);
         assert_eq!(g.n_used, 36);
         assert!((cost(&pb, &y, f64::NAN, g.params()).unwrap() - g.cost).abs() < 1e-15);
     }
@@ -755,14 +749,7 @@ mod tests {
         };
         let f = fit_grid(&pb, &y, f64::NAN, &Grid::default(), &Options::default()).unwrap();
         assert_eq!(f.n_used, 31);
-        for j in 0..4 {
-            assert!(
-                (f.params[j] - truth[j]).abs() < 1e-6,
-                "p{j}: {} vs {}",
-                f.params[j],
-                truth[j]
-            );
-        }
+        assert_recovered(&f, &truth);
     }
 
     #[test]
@@ -782,14 +769,7 @@ mod tests {
         let f = fit_grid(&pb, &y, f64::NAN, &Grid::default(), &Options::default()).unwrap();
         assert!(f.converged);
         assert_eq!(f.params().len(), 7);
-        for j in 0..7 {
-            assert!(
-                (f.params[j] - truth[j]).abs() < 1e-6,
-                "p{j}: {} vs {}",
-                f.params[j],
-                truth[j]
-            );
-        }
+        assert_recovered(&f, &truth);
     }
 
     #[test]
@@ -838,14 +818,7 @@ mod tests {
             scale: &sc,
         };
         let f = fit_grid(&pb, &y, f64::NAN, &Grid::default(), &Options::default()).unwrap();
-        for j in 0..6 {
-            assert!(
-                (f.params[j] - truth[j]).abs() < 1e-6,
-                "p{j}: {} vs {}",
-                f.params[j],
-                truth[j]
-            );
-        }
+        assert_recovered(&f, &truth);
     }
 
     #[test]
@@ -862,8 +835,8 @@ mod tests {
         let f = fit_grid(&pb, &y, f64::NAN, &Grid::default(), &Options::default()).unwrap();
         assert_eq!(f.params[2], PAPER_BOUNDS[2][0]);
         assert!(f.converged && f.cost.is_finite());
-        for j in 0..4 {
-            assert!(f.params[j] >= PAPER_BOUNDS[j][0] && f.params[j] <= PAPER_BOUNDS[j][1]);
+        for (v, [lo, hi]) in f.params().iter().zip(PAPER_BOUNDS) {
+            assert!((lo..=hi).contains(v));
         }
     }
 
