@@ -424,13 +424,11 @@ mod tests {
         // f32 storage of the standardised values limits the match.
         assert!(r.mse < 1e-9, "MSE {}", r.mse);
         for (d, p) in r.days.iter().zip(&truth) {
-            for j in 0..4 {
+            for (j, (got, want)) in d.params.iter().zip(p).enumerate() {
                 assert!(
-                    (d.params[j] - p[j]).abs() < 1e-2 * (1.0 + p[j].abs()),
-                    "{}: p{j} {} vs {}",
-                    d.date,
-                    d.params[j],
-                    p[j]
+                    (got - want).abs() < 1e-2 * (1.0 + want.abs()),
+                    "{}: p{j} {got} vs {want}",
+                    d.date
                 );
             }
         }
