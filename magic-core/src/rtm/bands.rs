@@ -252,8 +252,8 @@ impl<V: Values> Packed<V> {
                 let ix: [usize; LANES] = core::array::from_fn(|j| (i + j).min(self.n_rows - 1));
                 let rows = ix.map(|k| self.row(k));
                 let t = scene.wavelengths(&rows);
-                for j in 0..LANES.min(self.n_rows - i) {
-                    acc(i + j, t[j].r_forest, out);
+                for (j, tj) in t.iter().take(LANES.min(self.n_rows - i)).enumerate() {
+                    acc(i + j, tj.r_forest, out);
                 }
                 i += LANES;
             }
@@ -415,8 +415,8 @@ mod tests {
             .unwrap();
         for b in 0..2 {
             assert!((yj[b] - full[b].v).abs() < 1e-15);
-            for j in 0..N_LEARNED {
-                assert!((jac[b][j] - full[b].d[j]).abs() <= 1e-12 * (1.0 + full[b].d[j].abs()));
+            for (a, e) in jac[b].iter().zip(&full[b].d) {
+                assert!((a - e).abs() <= 1e-12 * (1.0 + e.abs()));
             }
         }
     }
