@@ -337,7 +337,7 @@ pub fn summary_line(r: &ClassicalResult) -> String {
         r.effects.join("+")
     };
     let mut s = format!(
-        "{:<5} effects {:<18} n {:>5}  MSE {:.4}  plausible {:>5.1} %  converged {:>5.1} %  at bound {:>5.1} %  median source x {:.2} y {:.2} d {:.2} km dV {:.3}",
+        "{:<5} effects {:<22} n {:>5}  MSE {:.4}  plausible {:>5.1} %  converged {:>5.1} %  at bound {:>5.1} %  median source x {:.2} y {:.2} d {:.2} km dV {:.3}",
         r.split,
         eff,
         r.n,
