@@ -276,3 +276,84 @@ fn forward_rtm_command_matches_the_oracle() {
     assert!(worst < 1e-10, "forward rtm vs oracle: {worst}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The RTM model on the Cortex-M4F under QEMU (f32 physics from the model file's f32 rows)
+/// agrees with the host's f64 inversion. Skipped when the toolchain or QEMU is missing.
+#[test]
+fn rtm_model_runs_on_the_firmware_under_qemu() {
+    let Some((_, bytes)) = trained_b() else {
+        return;
+    };
+    if let Err(e) = magic_train::qemu::ensure_toolchain() {
+        eprintln!("notice: no firmware toolchain ({e}); skipping");
+        return;
+    }
+    let s = setup().unwrap();
+    let dir = std::env::temp_dir().join(format!("magic-rtm-fw-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("rtm_b.magic");
+    std::fs::write(&path, bytes).unwrap();
+    let elf = magic_train::qemu::build_firmware(&path).unwrap();
+    let rows: Vec<Vec<f32>> = s
+        .data
+        .test
+        .rows
+        .x
+        .iter()
+        .take(8)
+        .map(|r| physical(&s.data, r))
+        .collect();
+    let input: String = rows
+        .iter()
+        .map(|r| {
+            r.iter()
+                .map(|v| format!("{v}"))
+                .collect::<Vec<_>>()
+                .join(",")
+                + "\n"
+        })
+        .collect();
+    let run = magic_train::qemu::run_firmware(&elf, &input, 300).unwrap();
+    assert!(run.success, "firmware failed: {}", run.stderr);
+    assert_eq!(run.results.len(), rows.len());
+    let m = Model::decode(bytes).unwrap();
+    let mut ws = Workspace::default();
+    for (row, line) in rows.iter().zip(&run.results) {
+        let inv = invert::<f64>(&m, row, &mut ws).unwrap();
+        let got: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
+        assert_eq!(got.len(), inv.n_params + 3, "{line}");
+        for j in 0..inv.n_params {
+            let (a, e) = (got[j], inv.params[j]);
+            assert!(
+                (a - e).abs() <= 1e-3 * e.abs().max(1e-2),
+                "variable {j}: board {a}, host {e}"
+            );
+        }
+    }
+    eprintln!(
+        "RTM on the board: {:?} instructions per inversion, stack {:?} bytes, flash {:?} bytes",
+        run.instructions_per_inversion, run.stack_bytes, run.flash_bytes
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The paper's released C weights, run through our INFORM (model file, f32 rows) and the core's
+/// `invert`, reproduce its Table 3 test MSE and its physics-only MSE.
+#[test]
+fn released_c_weights_reproduce_the_paper_through_our_forward_model() {
+    let Some(s) = setup() else { return };
+    let w = data_dir()
+        .unwrap()
+        .join("oracle/pretrained_rtm_c_weights.json");
+    let model = magic_train::rtm_pipeline::released_c(s, &w).unwrap();
+    let bytes = model.encode().unwrap();
+    let m = Model::decode(&bytes).unwrap();
+    let r = magic_train::rtm_pipeline::evaluate_par(&m, &s.data.test.rows, "test").unwrap();
+    let p = r.physics_mse.unwrap();
+    eprintln!(
+        "released C through our F: test MSE {:.4}, physics-only {p:.4}",
+        r.mse
+    );
+    assert!((r.mse - 0.0217).abs() < 1e-3, "test MSE {}", r.mse);
+    assert!((p - 1.04).abs() < 0.02, "physics-only MSE {p}");
+}
