@@ -1,8 +1,8 @@
 //! INFORM on the table rows a set of observed bands needs, from `f64` slices (host) or from the
 //! little-endian `f32` bytes of a model file (board).
 //!
-//! A model file cannot carry the 2101-wavelength tables of [`Tables`](super::Tables) (≈ 300 KiB in
-//! f32 with the full resampling matrix) and does not need to: a band only sees the wavelengths
+//! A model file cannot carry the 2101-wavelength tables of [`Tables`] (213 KiB in f32 with
+//! the full resampling matrix) and does not need to: a band only sees the wavelengths
 //! where its spectral response is non-zero. [`Packed`] keeps, for each such wavelength in
 //! ascending order, one *spectral row* of [`ROW_WIDTH`] values
 //!
@@ -12,7 +12,7 @@
 //!
 //! and one *weight row* (the resampling weights of the observed bands, in band order), plus the
 //! beta leaf-angle table (13 angles × rows, angle-major as in `lidf_tables.csv`). For the 11 bands
-//! of the S2 dataset that is 842 rows, 81 KiB in f32.
+//! of the S2 dataset that is 798 rows, 75 KiB in f32.
 //!
 //! [`Packed::forward`] evaluates exactly what [`Inform::forward`] does, restricted to these rows,
 //! in any [`Real`] (`f32` on the board), without allocation; [`Packed::jacobian`] is the
