@@ -106,7 +106,10 @@ pub const PEAK_WINDOW: usize = 31;
 /// Iteration limit of each refinement (steps, accepted or not).
 pub const MAX_ITER: u32 = 2000;
 
-/// Fits every day of `split` with the source and the latent variables of `effects`.
+/// Fits every day of `split` with the source and the latent variables of `effects`. Fitted
+/// effects (seasonal, step, drift: constants found by the residual analysis) are applied as fixed
+/// terms at each row's date; latent ones add unknowns (bounds from
+/// [`crate::pipeline::effect_bounds`]).
 pub fn fit_split(data: &GnssData, split: &str, effects: &[OwnedEffect]) -> Result<ClassicalResult> {
     fit_split_with(data, split, effects, &GRID)
 }
@@ -120,14 +123,6 @@ pub fn fit_split_with(
 ) -> Result<ClassicalResult> {
     let s = data.split(split)?;
     let t0 = std::time::Instant::now();
-    for e in effects {
-        if e.n_latent() == 0 {
-            bail!(
-                "effect `{}` has no latent variables: the classical fit takes latent families only",
-                e.family()
-            );
-        }
-    }
     let bytes: Vec<Vec<u8>> = effects.iter().map(OwnedEffect::bytes).collect();
     let core: Vec<Effect<'_>> = effects
         .iter()
@@ -461,13 +456,28 @@ mod tests {
     }
 
     #[test]
-    fn fitted_effects_are_refused() {
-        let s = synth::generate(synth::Scenario::parse("clean").unwrap(), 3);
-        let e = OwnedEffect::Drift {
+    fn fitted_effects_are_fixed_terms() {
+        let mut s = synth::generate(synth::Scenario::parse("clean").unwrap(), 3);
+        s.data.test.x.truncate(20);
+        s.data.test.dates.truncate(20);
+        let plain = fit_split(&s.data, "test", &[]).unwrap();
+        let zero = OwnedEffect::Drift {
             t0_day: 0.0,
             rate: vec![0.0; s.data.n_obs()],
         };
-        assert!(fit_split(&s.data, "test", &[e]).is_err());
+        let r = fit_split(&s.data, "test", &[zero]).unwrap();
+        assert_eq!(r.param_names.len(), 4);
+        assert!(
+            (r.mse - plain.mse).abs() < 1e-12,
+            "{} vs {}",
+            r.mse,
+            plain.mse
+        );
+        let wrong = OwnedEffect::Drift {
+            t0_day: 0.0,
+            rate: vec![0.0; 3],
+        };
+        assert!(fit_split(&s.data, "test", &[wrong]).is_err());
         assert!(fit_split(&s.data, "nope", &[]).is_err());
         assert_eq!(
             parse_grid("3,4,5,2").unwrap(),
