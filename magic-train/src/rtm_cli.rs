@@ -206,14 +206,37 @@ pub fn lai(model: &Path, data_dir: Option<&Path>, json: Option<&Path>) -> Result
         "{} spectra; {} matched to the extract by (sample_id = row, date); bands agree for {}, species for {}",
         r.spectra, r.matched, r.bands_agree, r.class_agree
     );
-    println!("| species | date | n | Spearman ρ | mean LAI (ours) | mean LAI (SNAP) |");
-    println!("|---|---|---|---|---|---|");
-    for g in &r.groups {
+    let row = |g: &crate::rtm_pipeline::LaiGroup| {
         println!(
             "| {} | {} | {} | {:.3} | {:.2} | {:.2} |",
             g.class, g.date, g.n, g.spearman, g.mean_lai, g.mean_snap
+        )
+    };
+    let head = || {
+        println!("| species | date | n | Spearman ρ | mean LAI (ours) | mean LAI (SNAP) |");
+        println!("|---|---|---|---|---|---|");
+    };
+    let pooled = |g: &&crate::rtm_pipeline::LaiGroup| g.class == "all" || g.date == "all";
+    println!("\nPooled over dates or species:");
+    head();
+    r.groups.iter().filter(pooled).for_each(row);
+    let mut per: Vec<f64> = r
+        .groups
+        .iter()
+        .filter(|g| !pooled(g))
+        .map(|g| g.spearman)
+        .collect();
+    per.sort_by(f64::total_cmp);
+    if !per.is_empty() {
+        let pos = per.iter().filter(|v| **v > 0.0).count();
+        println!(
+            "\nPer species and date ({} groups of at least 10 spectra): median ρ {:.3}, {pos} positive",
+            per.len(),
+            per[per.len() / 2]
         );
     }
+    head();
+    r.groups.iter().filter(|g| !pooled(g)).for_each(row);
     if let Some(p) = json {
         std::fs::write(p, serde_json::to_string_pretty(&r)?)
             .with_context(|| format!("{}: cannot write", p.display()))?;
