@@ -32,7 +32,7 @@ impl ObsRow {
 /// Channel names of a model (`ux_<STA>` …).
 pub fn model_channels(model: &Model<'_>) -> Result<Vec<String>> {
     match &model.problem {
-        Problem::Mogi { names, .. } => Ok(channel_names(&names.iter().map(|s| s.as_str().to_string()).collect::<Vec<_>>())),
+        Problem::Mogi { names, .. } => Ok(channel_names(&names.iter().map(|s| s.to_string()).collect::<Vec<_>>())),
         Problem::Rtm { .. } => {
             let (idx, n) = model.problem.band_indices();
             Ok(idx[..n].iter().map(|&b| magic_core::rtm::S2_BANDS[b].to_string()).collect())
@@ -84,7 +84,7 @@ pub fn result_header(model: &Model<'_>, with_date: bool) -> String {
     }
     let names: &[&str] = match (&model.problem, model.variant) {
         (Problem::Mogi { .. }, _) => &magic_core::mogi::PARAM_NAMES,
-        (Problem::Rtm { .. }, magic_core::Variant::A) => &[],
+        (Problem::Rtm { .. }, magic_core::Variant::A) => &["z0", "z1", "z2", "z3", "z4", "z5", "z6"],
         (Problem::Rtm { .. }, _) => &RTM_RESULT_NAMES,
     };
     for n in names {
