@@ -357,3 +357,35 @@ fn released_c_weights_reproduce_the_paper_through_our_forward_model() {
     assert!((r.mse - 0.0217).abs() < 1e-3, "test MSE {}", r.mse);
     assert!((p - 1.04).abs() < 0.02, "physics-only MSE {p}");
 }
+
+/// The S2 reader names the file, line and column of a bad cell, and finds bands by prefix.
+#[test]
+fn s2_reader_reports_bad_cells_by_file_line_and_column() {
+    let dir = std::env::temp_dir().join(format!("magic-s2-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bands = "B02_BLUE,B03_GREEN,B04_RED,B05_RE1,B06_RE2,B07_RE3,B08_NIR1,B8A_NIR2,B09_WV,B11_SWI1,B12_SWI2";
+    let good = "0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,0.9,1.0,1.1,Fagus sylvatica,3,2018.07.02";
+    let write = |name: &str, body: &str| std::fs::write(dir.join(name), body).unwrap();
+    write("train_x_mean.csv", &"0.05\n".repeat(11));
+    write("train_x_scale.csv", &"0.01\n".repeat(11));
+    let split = |rows: &[&str]| format!("{bands},class,sample_id,date\n{}\n", rows.join("\n"));
+    write("train.csv", &split(&[good, good]));
+    write("valid.csv", &split(&[good]));
+    write("test.csv", &split(&[good]));
+    let d = S2Data::read(&dir).unwrap();
+    assert_eq!((d.train.len(), d.n_obs(), d.train.sample_id[1]), (2, 11, 3));
+    assert_eq!(d.columns[7], "B8A_NIR2");
+    write("train.csv", &split(&[good, &good.replacen("0.2", "x", 1)]));
+    let e = S2Data::read(&dir).unwrap_err().to_string();
+    assert!(
+        e.contains("train.csv:3:2") && e.contains("B03_GREEN"),
+        "{e}"
+    );
+    write("train.csv", &split(&[&good.replace("2018.07.02", "July")]));
+    let e = S2Data::read(&dir).unwrap_err().to_string();
+    assert!(e.contains("train.csv:2:14") && e.contains("date"), "{e}");
+    write("train.csv", &split(&[good]).replace("B09_WV", "B10"));
+    let e = S2Data::read(&dir).unwrap_err().to_string();
+    assert!(e.contains("B09"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
