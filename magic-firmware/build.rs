@@ -1,8 +1,8 @@
 //! Build script of the firmware.
 //!
 //! For the bare-metal target (`target_os = "none"`) it
-//! * puts `memory.x` (and an empty `device.x`) on the linker search path and links with
-//!   cortex-m-rt's `link.x`;
+//! * puts `memory.x` (`memory-rtm.x` with the feature `rtm`; and an empty `device.x`) on the linker
+//!   search path and links with cortex-m-rt's `link.x`;
 //! * embeds the model file named by the environment variable `MAGIC_MODEL` (copied into `OUT_DIR`
 //!   as `model.magic`, read by `include_bytes!`). A relative path is taken from the workspace root.
 //!   Without `MAGIC_MODEL` the build fails with a message saying how to set it.
@@ -24,9 +24,19 @@ fn main() {
         PathBuf::from(env::var_os("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
 
+    // The budgeted Mogi firmware links with memory.x; with the `rtm` feature (RTM models and
+    // their tables) with memory-rtm.x.
+    let layout = if env::var_os("CARGO_FEATURE_RTM").is_some() {
+        "memory-rtm.x"
+    } else {
+        "memory.x"
+    };
     println!("cargo:rerun-if-changed=memory.x");
-    if let Err(e) = fs::copy(manifest.join("memory.x"), out.join("memory.x")) {
-        fail(&format!("cannot copy memory.x into OUT_DIR: {e}"));
+    println!("cargo:rerun-if-changed=memory-rtm.x");
+    if let Err(e) = fs::copy(manifest.join(layout), out.join("memory.x")) {
+        fail(&format!(
+            "cannot copy {layout} into OUT_DIR as memory.x: {e}"
+        ));
     }
     // cortex-m-rt's `device` feature includes `device.x` (interrupt handler names of a device
     // crate); the firmware has none (its one-entry interrupt table is in `src/rt.rs`).

@@ -12,7 +12,7 @@
 //! Every term is generic over [`Real`] so the trainer differentiates through it exactly and the
 //! board evaluates it in f32. Times are day numbers (days since 1970-01-01, see [`crate::time`]).
 
-use crate::mogi::{self, Station};
+use crate::mogi::{self, Network, Station};
 use crate::quant::LeF32;
 use crate::{Error, Real};
 use serde::{Deserialize, Serialize};
@@ -143,7 +143,21 @@ impl Effect<'_> {
         t_day: f64,
         out: &mut [R],
     ) -> Result<(), Error> {
-        let s = stations.len();
+        self.apply_to(stations, latent, t_day, out)
+    }
+
+    /// [`Effect::apply`] for any [`Network`] (e.g. the stations of a model file).
+    ///
+    /// Everything is computed in `R` (f32 on the board): the date enters through one reduction of
+    /// `t_day` to the phase within the year (seasonal) or to years since the reference (drift).
+    pub fn apply_to<R: Real, N: Network + ?Sized>(
+        &self,
+        stations: &N,
+        latent: &[R],
+        t_day: f64,
+        out: &mut [R],
+    ) -> Result<(), Error> {
+        let s = stations.n_stations();
         if out.len() != 3 * s || latent.len() != self.n_latent() {
             return Err(Error::SizeMismatch {
                 what: "effect inputs",
@@ -158,15 +172,20 @@ impl Effect<'_> {
         }
         match *self {
             Effect::CommonMode => {
-                for k in 0..3 {
-                    for o in &mut out[k * s..(k + 1) * s] {
-                        *o += latent[k];
+                // One translation per component (E, N, U), each added to every station.
+                for (comp, &l) in out.chunks_exact_mut(s.max(1)).zip(latent) {
+                    for o in comp {
+                        *o += l;
                     }
                 }
             }
             Effect::Elevation { z_ref_km } => {
-                for (i, st) in stations.iter().enumerate() {
-                    out[2 * s + i] += latent[0] * R::c(st.z_km - z_ref_km as f64);
+                let (Some(&k), Some(up)) = (latent.first(), out.get_mut(2 * s..)) else {
+                    return Ok(());
+                };
+                let z_ref = R::c(z_ref_km as f64);
+                for (i, o) in up.iter_mut().enumerate() {
+                    *o += k * (R::c(stations.station(i).z_km) - z_ref);
                 }
             }
             Effect::SecondSource {
@@ -174,33 +193,40 @@ impl Effect<'_> {
                 y_km,
                 depth_km,
             } => {
+                let Some(&dv) = latent.first() else {
+                    return Ok(());
+                };
                 let p = [
                     R::c(x_km as f64),
                     R::c(y_km as f64),
                     R::c(depth_km as f64),
-                    latent[0],
+                    dv,
                 ];
-                for (i, st) in stations.iter().enumerate() {
-                    let u = mogi::displacement(st, &p);
-                    for k in 0..3 {
-                        out[k * s + i] += u[k];
-                    }
+                let Some((ue, rest)) = out.split_at_mut_checked(s) else {
+                    return Ok(());
+                };
+                let (un, uu) = rest.split_at_mut(rest.len() / 2);
+                for (i, ((e, n), u)) in ue.iter_mut().zip(un).zip(uu).enumerate() {
+                    let d = mogi::displacement(&stations.station(i), &p);
+                    *e += d[0];
+                    *n += d[1];
+                    *u += d[2];
                 }
             }
             Effect::Seasonal { coef } => {
-                let w = TWO_PI * t_day / YEAR_DAYS;
-                let basis = [
-                    libm::sin(w),
-                    libm::cos(w),
-                    libm::sin(2.0 * w),
-                    libm::cos(2.0 * w),
-                ];
-                for (c, o) in out.iter_mut().enumerate() {
-                    let mut v = 0.0;
-                    for (j, b) in basis.iter().enumerate() {
-                        v += coef.get(4 * c + j) as f64 * b;
+                // The phase within the year, reduced in f64 once; the trigonometry runs in R
+                // (one sine and one cosine, the semiannual terms by the double-angle formulas).
+                let cycles = t_day / YEAR_DAYS;
+                let w = R::c(TWO_PI * (cycles - libm::floor(cycles)));
+                let (sn, cs) = (w.sin(), w.cos());
+                let basis = [sn, cs, R::c(2.0) * sn * cs, cs * cs - sn * sn];
+                for (o, c) in out.iter_mut().zip(coef.0.chunks_exact(16)) {
+                    let mut v = R::zero();
+                    for (b, cb) in basis.iter().zip(c.chunks_exact(4)) {
+                        let x = f32::from_le_bytes([cb[0], cb[1], cb[2], cb[3]]);
+                        v += R::c(x as f64) * *b;
                     }
-                    *o += R::c(v);
+                    *o += v;
                 }
             }
             Effect::Step {
@@ -210,15 +236,17 @@ impl Effect<'_> {
             } => {
                 if t_day >= epoch_day as f64 {
                     let i = station as usize;
-                    for k in 0..3 {
-                        out[k * s + i] += R::c(offset_mm[k] as f64);
+                    for (k, off) in offset_mm.iter().enumerate() {
+                        if let Some(o) = out.get_mut(k * s + i) {
+                            *o += R::c(*off as f64);
+                        }
                     }
                 }
             }
             Effect::Drift { t0_day, rate } => {
-                let dt = (t_day - t0_day as f64) / YEAR_DAYS;
-                for (c, o) in out.iter_mut().enumerate() {
-                    *o += R::c(rate.get(c) as f64 * dt);
+                let years = R::c((t_day - t0_day as f64) / YEAR_DAYS);
+                for (o, r) in out.iter_mut().zip(rate.iter()) {
+                    *o += R::c(r as f64) * years;
                 }
             }
         }
@@ -235,6 +263,17 @@ pub fn mogi_with_effects<R: Real>(
     t_day: f64,
     out: &mut [R],
 ) -> Result<(), Error> {
+    mogi_with_effects_of(stations, effects, params, t_day, out)
+}
+
+/// [`mogi_with_effects`] for any [`Network`] (e.g. the stations of a model file).
+pub fn mogi_with_effects_of<R: Real, N: Network + ?Sized>(
+    stations: &N,
+    effects: &[Effect<'_>],
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+) -> Result<(), Error> {
     let p: [R; mogi::N_PARAMS] = params
         .get(..mogi::N_PARAMS)
         .and_then(|s| s.try_into().ok())
@@ -243,7 +282,7 @@ pub fn mogi_with_effects<R: Real>(
             expected: mogi::N_PARAMS,
             found: params.len(),
         })?;
-    mogi::field(stations, &p, out)?;
+    mogi::field_of(stations, &p, out)?;
     let mut k = mogi::N_PARAMS;
     for e in effects {
         let n = e.n_latent();
@@ -252,7 +291,7 @@ pub fn mogi_with_effects<R: Real>(
             expected: k + n,
             found: params.len(),
         })?;
-        e.apply(stations, lat, t_day, out)?;
+        e.apply_to(stations, lat, t_day, out)?;
         k += n;
     }
     Ok(())

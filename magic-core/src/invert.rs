@@ -8,8 +8,8 @@
 //! reconstruction; they are left out of the residual and reported in the flags and the station
 //! mask.
 
-use crate::effects::mogi_with_effects;
-use crate::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
+use crate::effects::mogi_with_effects_of;
+use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
 use crate::nn::{run, Scratch};
 use crate::rtm::inform::crown_from_cover;
 use crate::rtm::N_LEARNED;
@@ -100,8 +100,23 @@ pub fn invert_at<R: Real>(
     t_day: f64,
     ws: &mut Workspace,
 ) -> Result<Inversion<R>, Error> {
+    invert_at_for::<R, AnyProblem>(model, obs, t_day, ws)
+}
+
+/// [`invert_at`] in a build that links only the forward models of `P` (see
+/// [`crate::model_file::Problems`]; the firmware uses [`crate::model_file::MogiOnly`]).
+///
+/// Everything after the networks is computed in `R` (f32 on the board, no soft-float f64):
+/// the bounds mapping, the forward model, the destandardisation and the residual, which is
+/// converted to `f64` once at the end.
+pub fn invert_at_for<R: Real, P: Problems>(
+    model: &Model<'_>,
+    obs: &[f32],
+    t_day: f64,
+    ws: &mut Workspace,
+) -> Result<Inversion<R>, Error> {
     let n_obs = model.n_obs();
-    if obs.len() != n_obs {
+    if obs.len() != n_obs || n_obs > MAX_OBS {
         return Err(Error::SizeMismatch {
             what: "observations",
             expected: n_obs,
@@ -110,7 +125,7 @@ pub fn invert_at<R: Real>(
     }
     let mut z = [0f32; MAX_OBS];
     let mut observed = 0usize;
-    for (i, &x) in obs.iter().enumerate() {
+    for (i, (&x, zi)) in obs.iter().zip(z.iter_mut()).enumerate() {
         if x.is_nan() {
             continue;
         }
@@ -120,12 +135,13 @@ pub fn invert_at<R: Real>(
                 index: i,
             });
         }
-        if (x as f64).abs() > MAX_ABS_OBS {
+        // (1e4 is exact in f32: the same test as in f64.)
+        if x.abs() > MAX_ABS_OBS as f32 {
             return Err(Error::OutOfRange {
                 what: "observation magnitude",
             });
         }
-        z[i] = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
+        *zi = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
         observed += 1;
     }
     let n_params = model.n_params();
@@ -145,71 +161,76 @@ pub fn invert_at<R: Real>(
     };
     let per_group = n_obs / groups.max(1);
     let mut used = 0u32;
-    for (i, x) in obs.iter().enumerate() {
-        if !x.is_nan() && groups <= 32 {
-            let g = if per_group == 3 { i % groups } else { i };
-            used |= 1 << g;
+    if groups <= 32 {
+        for (i, x) in obs.iter().enumerate() {
+            if !x.is_nan() {
+                let g = if per_group == 3 { i % groups.max(1) } else { i };
+                used |= 1u32.wrapping_shl(g as u32);
+            }
         }
     }
 
-    let mut pass = Pass::<R>::run(model, &z[..n_obs], t_day, ws)?;
+    let mut out = Inversion {
+        n_params: 0,
+        params: [R::zero(); MAX_PARAMS],
+        unit: [0f32; MAX_PARAMS],
+        n_obs,
+        physics: [R::zero(); MAX_OBS],
+        recon: [R::zero(); MAX_OBS],
+        residual_rms: 0.0,
+        residual_rms_std: 0.0,
+        flags,
+        used,
+    };
+    let mut at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, &mut out)?;
     if observed < n_obs {
         // Missing channels: refill them with the model's own reconstruction and invert again.
         for _ in 0..IMPUTE_PASSES {
-            for i in 0..n_obs {
-                if obs[i].is_nan() {
-                    z[i] = ((pass.recon[i].value() as f32) - model.obs_mean.get(i))
-                        / model.obs_scale.get(i);
+            for (i, ((zi, x), r)) in z.iter_mut().zip(obs).zip(&out.recon).enumerate() {
+                if x.is_nan() {
+                    *zi = (R::value(*r) as f32 - model.obs_mean.get(i)) / model.obs_scale.get(i);
                 }
             }
-            pass = Pass::run(model, &z[..n_obs], t_day, ws)?;
+            at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, &mut out)?;
         }
     }
-    let Pass {
-        mut params,
-        unit,
-        physics,
-        recon,
-        at_bound,
-    } = pass;
-    let mut n_params = n_params;
+    out.n_params = n_params;
     if let (Problem::Rtm { fixed, .. }, Variant::B | Variant::C) = (&model.problem, model.variant) {
-        let (cd, h) = crown_from_cover(params[6], R::c(fixed.sd));
-        params[n_params] = cd;
-        params[n_params + 1] = h;
-        n_params += N_DERIVED_RTM;
+        if !P::RTM {
+            return Err(Error::WrongProblem);
+        }
+        if let (Some(&fc), true) = (out.params.get(6), n_params + N_DERIVED_RTM <= MAX_PARAMS) {
+            let (cd, h) = crown_from_cover(fc, R::c(fixed.sd));
+            out.params[n_params] = cd;
+            out.params[n_params + 1] = h;
+            out.n_params += N_DERIVED_RTM;
+        }
     }
     if at_bound {
-        flags.0 |= Flags::AT_BOUND;
+        out.flags.0 |= Flags::AT_BOUND;
     }
 
-    let (mut ss, mut ss_std) = (0.0f64, 0.0f64);
-    for i in 0..n_obs {
-        if obs[i].is_nan() {
+    // The residual over the observed channels, in R.
+    let (mut ss, mut ss_std) = (R::zero(), R::zero());
+    for (i, (&x, &rec)) in obs.iter().zip(&out.recon).enumerate() {
+        if x.is_nan() {
             continue;
         }
-        let r = obs[i] as f64 - recon[i].value();
+        let r = R::c(x as f64) - rec;
         ss += r * r;
-        let rs = r / model.obs_scale.get(i) as f64;
+        let rs = r / R::c(model.obs_scale.get(i) as f64);
         ss_std += rs * rs;
     }
-    let residual_rms = libm::sqrt(ss / observed as f64);
-    let residual_rms_std = libm::sqrt(ss_std / observed as f64);
-    if model.residual_threshold > 0.0 && residual_rms_std > model.residual_threshold as f64 {
-        flags.0 |= Flags::HIGH_RESIDUAL;
+    // (`observed` ≤ MAX_OBS: exact in f32.)
+    let n = R::c(observed as f32 as f64);
+    let rms = (ss / n).sqrt();
+    let rms_std = (ss_std / n).sqrt();
+    if model.residual_threshold > 0.0 && rms_std > R::c(model.residual_threshold as f64) {
+        out.flags.0 |= Flags::HIGH_RESIDUAL;
     }
-    Ok(Inversion {
-        n_params,
-        params,
-        unit,
-        n_obs,
-        physics,
-        recon,
-        residual_rms,
-        residual_rms_std,
-        flags,
-        used,
-    })
+    out.residual_rms = rms.value();
+    out.residual_rms_std = rms_std.value();
+    Ok(out)
 }
 
 /// Extra passes for a day with missing channels: each refills the missing channels with the
@@ -217,68 +238,54 @@ pub fn invert_at<R: Real>(
 /// serves every pattern of missing stations).
 pub const IMPUTE_PASSES: usize = 3;
 
-/// One encoder → F → C pass on standardised observations.
-struct Pass<R> {
-    params: [R; MAX_PARAMS],
-    unit: [f32; MAX_PARAMS],
-    physics: [R; MAX_OBS],
-    recon: [R; MAX_OBS],
-    at_bound: bool,
-}
-
-impl<R: Real> Pass<R> {
-    fn run(model: &Model<'_>, z: &[f32], t_day: f64, ws: &mut Workspace) -> Result<Self, Error> {
-        let n_obs = z.len();
-        let n_params = model.n_params();
-        let mut unit = [0f32; MAX_PARAMS];
-        model_encoder(model, z, &mut unit[..n_params], ws)?;
-        let mut params = [R::zero(); MAX_PARAMS];
-        let mut physics = [R::zero(); MAX_OBS];
-        let mut recon = [R::zero(); MAX_OBS];
-        let mut at_bound = false;
-        match model.variant {
-            Variant::A => {
-                for (p, u) in params.iter_mut().zip(&unit[..n_params]) {
-                    *p = R::c(*u as f64);
-                }
-                let mut y = [0f32; MAX_OBS];
-                run(
-                    &model.decoder,
-                    &unit[..n_params],
-                    &mut y[..n_obs],
-                    &mut ws.nn,
-                )?;
-                destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
+/// One encoder → F → C pass on standardised observations, writing `params`, `unit`, `physics`
+/// and `recon` of `out` in place; returns whether a variable sits at its bound.
+fn pass<R: Real, P: Problems>(
+    model: &Model<'_>,
+    z: &[f32],
+    t_day: f64,
+    ws: &mut Workspace,
+    out: &mut Inversion<R>,
+) -> Result<bool, Error> {
+    let n_obs = z.len().min(MAX_OBS);
+    let n_params = model.n_params().min(MAX_PARAMS);
+    let unit = &mut out.unit[..n_params];
+    model_encoder(model, z, unit, ws)?;
+    let mut at_bound = false;
+    let mut y = [0f32; MAX_OBS];
+    match model.variant {
+        Variant::A => {
+            for (p, u) in out.params.iter_mut().zip(unit.iter()) {
+                *p = R::c(*u as f64);
             }
-            Variant::B | Variant::C => {
-                for (i, u) in unit[..n_params].iter().enumerate() {
-                    let [lo, hi] = model.bounds[i];
-                    params[i] = R::c(lo as f64) + R::c((hi - lo) as f64) * R::c(*u as f64);
-                    at_bound |= *u < 1e-3 || *u > 1.0 - 1e-3;
+            run(&model.decoder, unit, &mut y[..n_obs], &mut ws.nn)?;
+            destandardise(model, &y[..n_obs], &mut out.recon[..n_obs]);
+        }
+        Variant::B | Variant::C => {
+            for ((p, u), b) in out.params.iter_mut().zip(unit.iter()).zip(&model.bounds) {
+                let [lo, hi] = *b;
+                *p = R::c(lo as f64) + R::c((hi - lo) as f64) * R::c(*u as f64);
+                at_bound |= *u < 1e-3 || *u > 1.0 - 1e-3;
+            }
+            forward_for::<R, P>(
+                model,
+                &out.params[..n_params],
+                t_day,
+                &mut out.physics[..n_obs],
+            )?;
+            if model.variant == Variant::C {
+                let mut fz = [0f32; MAX_OBS];
+                for (i, (f, p)) in fz.iter_mut().zip(&out.physics[..n_obs]).enumerate() {
+                    *f = (R::value(*p) as f32 - model.obs_mean.get(i)) / model.obs_scale.get(i);
                 }
-                forward(model, &params[..n_params], t_day, &mut physics[..n_obs])?;
-                if model.variant == Variant::C {
-                    let mut fz = [0f32; MAX_OBS];
-                    for i in 0..n_obs {
-                        fz[i] = ((physics[i].value() as f32) - model.obs_mean.get(i))
-                            / model.obs_scale.get(i);
-                    }
-                    let mut y = [0f32; MAX_OBS];
-                    run(&model.decoder, &fz[..n_obs], &mut y[..n_obs], &mut ws.nn)?;
-                    destandardise(model, &y[..n_obs], &mut recon[..n_obs]);
-                } else {
-                    recon[..n_obs].copy_from_slice(&physics[..n_obs]);
-                }
+                run(&model.decoder, &fz[..n_obs], &mut y[..n_obs], &mut ws.nn)?;
+                destandardise(model, &y[..n_obs], &mut out.recon[..n_obs]);
+            } else {
+                out.recon[..n_obs].copy_from_slice(&out.physics[..n_obs]);
             }
         }
-        Ok(Pass {
-            params,
-            unit,
-            physics,
-            recon,
-            at_bound,
-        })
     }
+    Ok(at_bound)
 }
 
 /// Runs the encoder on standardised observations, writing its outputs (sigmoid units for B/C).
@@ -291,6 +298,16 @@ pub fn model_encoder(
     run(&model.encoder, z, out, &mut ws.nn)
 }
 
+/// Runs the correction C (variant C) or the decoder (variant A) on standardised values.
+pub fn model_decoder(
+    model: &Model<'_>,
+    z: &[f32],
+    out: &mut [f32],
+    ws: &mut Workspace,
+) -> Result<(), Error> {
+    run(&model.decoder, z, out, &mut ws.nn)
+}
+
 /// The model's forward model F with its declared effects: physical variables → observations in
 /// physical units, for an observation on day `t_day` (NaN if unknown).
 pub fn forward<R: Real>(
@@ -299,10 +316,22 @@ pub fn forward<R: Real>(
     t_day: f64,
     out: &mut [R],
 ) -> Result<(), Error> {
+    forward_for::<R, AnyProblem>(model, params, t_day, out)
+}
+
+/// [`forward`] in a build that links only the forward models of `P` (an RTM model is
+/// [`Error::WrongProblem`] for [`crate::model_file::MogiOnly`]).
+pub fn forward_for<R: Real, P: Problems>(
+    model: &Model<'_>,
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+) -> Result<(), Error> {
     match &model.problem {
         Problem::Mogi { stations, .. } => {
-            mogi_with_effects(stations, &model.effects, params, t_day, out)
+            mogi_with_effects_of(stations, &model.effects, params, t_day, out)
         }
+        Problem::Rtm { .. } if !P::RTM => Err(Error::WrongProblem),
         Problem::Rtm {
             fixed, geometry, ..
         } => {
@@ -322,6 +351,8 @@ pub fn forward<R: Real>(
     }
 }
 
+/// Destandardises network outputs into R (`x = y · scale + mean`, computed in f32 as the
+/// network's outputs are).
 fn destandardise<R: Real>(model: &Model<'_>, y: &[f32], out: &mut [R]) {
     for (i, (o, v)) in out.iter_mut().zip(y).enumerate() {
         *o = R::c((v * model.obs_scale.get(i) + model.obs_mean.get(i)) as f64);

@@ -5,13 +5,18 @@
 //! ```
 //!
 //! The CRC covers everything before it. The body is a [`Model`] serialised with postcard; decoding
-//! borrows every weight array straight from the byte slice (no allocation, no copy: a model in
-//! flash stays in flash), and [`Model::decode`] validates the decoded structure against the sizes
-//! this build was compiled for, so a corrupt, truncated or foreign file is an [`Error`], never a
-//! panic or an out-of-bounds read.
+//! borrows every array (weights, station positions, station names) straight from the byte slice
+//! (no allocation, no copy: a model in flash stays in flash), and [`Model::decode`] validates the
+//! decoded structure against the sizes this build was compiled for, so a corrupt, truncated or
+//! foreign file is an [`Error`], never a panic or an out-of-bounds read.
+//!
+//! Format versions: 3 added the RTM problem; 4 stores a Mogi network's stations as borrowed
+//! little-endian `f64` bytes ([`Stations`]) and its names as one borrowed comma-separated string
+//! ([`Names`]) instead of fixed-capacity vectors, which makes the decoded [`Model`] small enough
+//! to decode within a microcontroller's stack budget.
 
 use crate::effects::{Effect, MAX_EFFECTS};
-use crate::mogi::{self, Station};
+use crate::mogi::{self, Stations};
 use crate::nn::{validate_chain, Activation, Layer, MAX_LAYERS};
 use crate::quant::LeF32;
 use crate::rtm::bands::Packed;
@@ -22,7 +27,7 @@ use serde::{Deserialize, Serialize};
 /// The first four bytes of every model file.
 pub const MAGIC: [u8; 4] = *b"MAGC";
 /// The format version this build reads and writes.
-pub const VERSION: u16 = 3;
+pub const VERSION: u16 = 4;
 /// Largest station network the compiled core accepts.
 pub const MAX_STATIONS: usize = 32;
 /// Largest number of physical variables (source parameters plus effect parameters).
@@ -30,8 +35,64 @@ pub const MAX_PARAMS: usize = 16;
 /// Largest number of observed channels.
 pub const MAX_OBS: usize = 3 * MAX_STATIONS;
 
+/// Longest station name (bytes).
+pub const MAX_NAME: usize = 8;
+
 const HEADER: usize = 10;
+// Bare-metal builds compute the CRC bit by bit (no 1 KiB table in flash; it runs once, at start-up);
+// hosts use the byte table.
+#[cfg(target_os = "none")]
+const CRC: crc::Crc<u32, crc::NoTable> = crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
+#[cfg(not(target_os = "none"))]
 const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// Which forward models a build links. [`Model::decode_for`], [`crate::invert::invert_at_for`] and
+/// [`crate::invert::forward_for`] take it as a type parameter, so that a build that only inverts
+/// GNSS networks ([`MogiOnly`], the firmware) carries no INFORM code; an RTM model given to it is
+/// [`Error::WrongProblem`]. [`AnyProblem`] (what [`Model::decode`] and
+/// [`crate::invert::invert_at`] use) links both.
+pub trait Problems {
+    /// Whether the RTM forward model (INFORM over the model's table rows) is linked.
+    const RTM: bool;
+}
+
+/// Every problem kind: Mogi and RTM.
+#[derive(Clone, Copy, Debug)]
+pub enum AnyProblem {}
+
+impl Problems for AnyProblem {
+    const RTM: bool = true;
+}
+
+/// Mogi networks only (the firmware): RTM models are rejected with [`Error::WrongProblem`].
+#[derive(Clone, Copy, Debug)]
+pub enum MogiOnly {}
+
+impl Problems for MogiOnly {
+    const RTM: bool = false;
+}
+
+/// Station names borrowed from a model file: one string, the names separated by commas (each 1 to
+/// [`MAX_NAME`] bytes, validated on decoding).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Names<'a>(#[serde(borrow)] pub &'a str);
+
+impl<'a> Names<'a> {
+    /// The names in order (none for an empty string).
+    pub fn iter(&self) -> impl Iterator<Item = &'a str> {
+        let s = self.0;
+        s.split(',').filter(move |_| !s.is_empty())
+    }
+    /// Number of names.
+    pub fn len(&self) -> usize {
+        self.iter().count()
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
 
 /// Which of the paper's models this is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -50,9 +111,11 @@ pub enum Problem<'a> {
     /// Mogi source under a GNSS network; observations are uₑ ×S, uₙ ×S, uᵥ ×S in mm.
     Mogi {
         /// Station positions, in the order of the observation channels.
-        stations: heapless::Vec<Station, MAX_STATIONS>,
+        #[serde(borrow)]
+        stations: Stations<'a>,
         /// Station names (e.g. `AV08`), in the same order; the data columns are `ux_<NAME>` etc.
-        names: heapless::Vec<heapless::String<8>, MAX_STATIONS>,
+        #[serde(borrow)]
+        names: Names<'a>,
     },
     /// INFORM forest reflectance in Sentinel-2 bands; observations are the observed bands'
     /// reflectances, in band order. Self-contained: the table rows the observed bands need are
@@ -192,8 +255,8 @@ impl<'a> Model<'a> {
     }
 
     /// Stations of a Mogi model.
-    pub fn stations(&self) -> Result<&[Station], Error> {
-        match &self.problem {
+    pub fn stations(&self) -> Result<Stations<'a>, Error> {
+        match self.problem {
             Problem::Mogi { stations, .. } => Ok(stations),
             _ => Err(Error::WrongProblem),
         }
@@ -208,6 +271,12 @@ impl<'a> Model<'a> {
     /// assert_eq!(Model::decode(b"MAG"), Err(Error::Truncated));
     /// ```
     pub fn decode(bytes: &'a [u8]) -> Result<Model<'a>, Error> {
+        Self::decode_for::<AnyProblem>(bytes)
+    }
+
+    /// [`Model::decode`] for a build that links only the forward models of `P` (see [`Problems`]):
+    /// a model of another kind is [`Error::WrongProblem`].
+    pub fn decode_for<P: Problems>(bytes: &'a [u8]) -> Result<Model<'a>, Error> {
         let n = bytes.len().min(4);
         if bytes[..n] != MAGIC[..n] {
             return Err(Error::BadMagic);
@@ -242,12 +311,17 @@ impl<'a> Model<'a> {
         if !rest.is_empty() {
             return Err(Error::Decode);
         }
-        model.validate()?;
+        model.validate_for::<P>()?;
         Ok(model)
     }
 
     /// Checks every size and value against the compiled limits and against each other.
     pub fn validate(&self) -> Result<(), Error> {
+        self.validate_for::<AnyProblem>()
+    }
+
+    /// [`Model::validate`] for a build that links only the forward models of `P`.
+    pub fn validate_for<P: Problems>(&self) -> Result<(), Error> {
         let n_obs = self.n_obs();
         if n_obs == 0 || n_obs > MAX_OBS || self.obs_mean.0.len() != 4 * n_obs {
             return Err(Error::InvalidModel(
@@ -276,12 +350,20 @@ impl<'a> Model<'a> {
         }
         let n_phys = match &self.problem {
             Problem::Mogi { stations, names } => {
+                if stations.0.len() % mogi::STATION_BYTES != 0 {
+                    return Err(Error::InvalidModel("station bytes are not whole stations"));
+                }
                 if names.len() != stations.len() {
                     return Err(Error::SizeMismatch {
                         what: "station names",
                         expected: stations.len(),
                         found: names.len(),
                     });
+                }
+                if names.iter().any(|n| n.is_empty() || n.len() > MAX_NAME) {
+                    return Err(Error::InvalidModel(
+                        "station name empty or longer than 8 bytes",
+                    ));
                 }
                 if stations.is_empty() {
                     return Err(Error::InvalidModel("no stations"));
@@ -304,6 +386,7 @@ impl<'a> Model<'a> {
                 }
                 mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
             }
+            Problem::Rtm { .. } if !P::RTM => return Err(Error::WrongProblem),
             Problem::Rtm { bands, fixed, .. } => {
                 if *bands >> N_BANDS != 0 {
                     return Err(Error::InvalidModel("RTM band mask names bands beyond B12"));
@@ -398,7 +481,7 @@ impl<'a> Model<'a> {
                     return Err(Error::InvalidModel("bounds must be finite with min < max"));
                 }
                 if let Problem::Mogi { .. } = self.problem {
-                    if self.bounds[2][0] <= 0.0 {
+                    if self.bounds.get(2).is_none_or(|b| b[0] <= 0.0) {
                         return Err(Error::InvalidModel("depth bound must be positive"));
                     }
                 }
@@ -454,5 +537,45 @@ fn geometry_of(p: &Problem<'_>) -> Geometry {
     match p {
         Problem::Rtm { geometry, .. } => *geometry,
         _ => Geometry::Reference,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_split_on_commas() {
+        let n = Names("AV08,AKGG,X");
+        assert_eq!(n.len(), 3);
+        assert!(n.iter().eq(["AV08", "AKGG", "X"]));
+        assert_eq!(Names("").len(), 0);
+        assert!(Names("").is_empty());
+        assert_eq!(Names("A,,B").iter().filter(|s| s.is_empty()).count(), 1);
+    }
+
+    #[test]
+    fn a_mogi_only_build_rejects_rtm_models() {
+        let one = 1.0f32.to_le_bytes();
+        let model = Model {
+            variant: Variant::B,
+            problem: Problem::Rtm {
+                geometry: Geometry::Reference,
+                fixed: Fixed::default(),
+                bands: 1,
+                spectral: LeF32(&[]),
+                weights: LeF32(&[]),
+                lidf_beta: LeF32(&[]),
+            },
+            obs_mean: LeF32(&one),
+            obs_scale: LeF32(&one),
+            bounds: heapless::Vec::new(),
+            encoder: heapless::Vec::new(),
+            decoder: heapless::Vec::new(),
+            residual_threshold: 0.0,
+            effects: heapless::Vec::new(),
+        };
+        assert_eq!(model.validate_for::<MogiOnly>(), Err(Error::WrongProblem));
+        assert_ne!(model.validate(), Err(Error::WrongProblem));
     }
 }

@@ -43,6 +43,116 @@ pub struct Station {
     pub z_km: f64,
 }
 
+/// A list of stations: a slice of [`Station`]s (the host) or the little-endian bytes of a model
+/// file ([`Stations`], read in place on the board).
+pub trait Network {
+    /// Number of stations.
+    fn n_stations(&self) -> usize;
+    /// Station `i`; implementations return a station at the origin past the end rather than
+    /// panicking (callers iterate over `0..n_stations()`).
+    fn station(&self, i: usize) -> Station;
+}
+
+/// The origin, returned past the end of a [`Network`].
+const ORIGIN: Station = Station {
+    x_km: 0.0,
+    y_km: 0.0,
+    z_km: 0.0,
+};
+
+impl Network for [Station] {
+    #[inline]
+    fn n_stations(&self) -> usize {
+        self.len()
+    }
+    #[inline]
+    fn station(&self, i: usize) -> Station {
+        self.get(i).copied().unwrap_or(ORIGIN)
+    }
+}
+
+/// Bytes per station in a model file: east, north, elevation as little-endian `f64` (km).
+pub const STATION_BYTES: usize = 24;
+
+/// Station positions borrowed from a model file: [`STATION_BYTES`] per station, east, north and
+/// elevation as little-endian `f64` km (no alignment requirement, nothing copied).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Stations<'a>(#[serde(borrow)] pub &'a [u8]);
+
+impl<'a> Stations<'a> {
+    /// Number of whole stations (trailing partial bytes are ignored; validation rejects them).
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.0.len() / STATION_BYTES
+    }
+    /// Whether there are none.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Station `i`, or the origin past the end.
+    #[inline]
+    pub fn get(&self, i: usize) -> Station {
+        match self
+            .0
+            .get(STATION_BYTES * i..STATION_BYTES * (i + 1))
+            .and_then(|b| <&[u8; STATION_BYTES]>::try_from(b).ok())
+        {
+            Some(b) => {
+                let f = |k: usize| {
+                    f64::from_le_bytes([
+                        b[8 * k],
+                        b[8 * k + 1],
+                        b[8 * k + 2],
+                        b[8 * k + 3],
+                        b[8 * k + 4],
+                        b[8 * k + 5],
+                        b[8 * k + 6],
+                        b[8 * k + 7],
+                    ])
+                };
+                Station {
+                    x_km: f(0),
+                    y_km: f(1),
+                    z_km: f(2),
+                }
+            }
+            None => ORIGIN,
+        }
+    }
+    /// The stations in order.
+    pub fn iter(&self) -> impl Iterator<Item = Station> + 'a {
+        let s = *self;
+        (0..s.len()).map(move |i| s.get(i))
+    }
+    /// The bytes of `stations` in this layout (for writing a model file).
+    pub fn encode(stations: &[Station], out: &mut [u8]) -> Result<(), Error> {
+        if out.len() != STATION_BYTES * stations.len() {
+            return Err(Error::BufferTooSmall {
+                needed: STATION_BYTES * stations.len(),
+            });
+        }
+        for (st, b) in stations.iter().zip(out.chunks_exact_mut(STATION_BYTES)) {
+            b[..8].copy_from_slice(&st.x_km.to_le_bytes());
+            b[8..16].copy_from_slice(&st.y_km.to_le_bytes());
+            b[16..].copy_from_slice(&st.z_km.to_le_bytes());
+        }
+        Ok(())
+    }
+}
+
+impl Network for Stations<'_> {
+    #[inline]
+    fn n_stations(&self) -> usize {
+        self.len()
+    }
+    #[inline]
+    fn station(&self, i: usize) -> Station {
+        self.get(i)
+    }
+}
+
 /// Displacement (east, north, up) in mm at one station from a source `p = [x, y, depth, ΔV]`.
 #[inline]
 pub fn displacement<R: Real>(station: &Station, p: &[R; N_PARAMS]) -> [R; 3] {
@@ -68,7 +178,16 @@ pub fn displacement<R: Real>(station: &Station, p: &[R; N_PARAMS]) -> [R; 3] {
 /// assert!(u[2] > 0.0); // inflation lifts the surface
 /// ```
 pub fn field<R: Real>(stations: &[Station], p: &[R; N_PARAMS], out: &mut [R]) -> Result<(), Error> {
-    let s = stations.len();
+    field_of(stations, p, out)
+}
+
+/// [`field`] for any [`Network`] (e.g. the [`Stations`] of a model file).
+pub fn field_of<R: Real, N: Network + ?Sized>(
+    stations: &N,
+    p: &[R; N_PARAMS],
+    out: &mut [R],
+) -> Result<(), Error> {
+    let s = stations.n_stations();
     if out.len() != 3 * s {
         return Err(Error::SizeMismatch {
             what: "mogi output",
@@ -81,11 +200,18 @@ pub fn field<R: Real>(stations: &[Station], p: &[R; N_PARAMS], out: &mut [R]) ->
             what: "source depth",
         });
     }
-    for (i, st) in stations.iter().enumerate() {
-        let u = displacement(st, p);
-        out[i] = u[0];
-        out[s + i] = u[1];
-        out[2 * s + i] = u[2];
+    // (Checked splits: no panic path even where the compiler cannot see that 3 · s fits.)
+    let Some((ue, rest)) = out.split_at_mut_checked(s) else {
+        return Err(Error::SizeMismatch {
+            what: "mogi output",
+            expected: 3 * s,
+            found: 0,
+        });
+    };
+    let (un, uu) = rest.split_at_mut(rest.len() / 2);
+    for (i, ((e, n), u)) in ue.iter_mut().zip(un).zip(uu).enumerate() {
+        let d = displacement(&stations.station(i), p);
+        (*e, *n, *u) = (d[0], d[1], d[2]);
     }
     Ok(())
 }
@@ -200,6 +326,27 @@ mod tests {
         for i in 0..6 {
             assert!((v[i] - 2.0 * u[i]).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn model_file_stations_read_back_exactly() {
+        let mut bytes = [0u8; 3 * STATION_BYTES];
+        Stations::encode(&NET, &mut bytes).unwrap();
+        let st = Stations(&bytes);
+        assert_eq!(st.len(), 3);
+        assert!(st.iter().eq(NET.iter().copied()));
+        assert_eq!(st.get(3), ORIGIN, "past the end");
+        assert_eq!(
+            Stations(&bytes[..50]).len(),
+            2,
+            "partial stations are not counted"
+        );
+        assert!(Stations::encode(&NET, &mut [0u8; 10]).is_err());
+        let p = [0.4, -1.0, 5.5, 2.0];
+        let (mut a, mut b) = ([0.0; 9], [0.0; 9]);
+        field(&NET, &p, &mut a).unwrap();
+        field_of(&st, &p, &mut b).unwrap();
+        assert_eq!(a, b, "same field from the slice and from the bytes");
     }
 
     #[test]

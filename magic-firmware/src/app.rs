@@ -5,8 +5,12 @@ use crate::cost::{self, Clock, Stat};
 use crate::io::{Line, Out, Stdin, LINE_MAX};
 use crate::text::{parse_record_bytes, write_result};
 use core::fmt::Write;
-use magic_core::invert::{forward, invert_at, model_encoder, Workspace};
+use magic_core::invert::{forward_for, invert_at_for, model_decoder, model_encoder, Workspace};
 use magic_core::line::{write_error, LineError};
+#[cfg(feature = "rtm")]
+use magic_core::model_file::AnyProblem;
+#[cfg(not(feature = "rtm"))]
+use magic_core::model_file::MogiOnly;
 use magic_core::model_file::{Model, Variant, MAX_OBS, MAX_PARAMS};
 use magic_core::nn::{self, Layer, Weights};
 use magic_core::quant;
@@ -14,6 +18,13 @@ use magic_core::Flags;
 
 /// The model file named by `MAGIC_MODEL` at build time (see `build.rs`).
 static MODEL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/model.magic"));
+
+/// The forward models this build links: the Mogi model only (the budgeted firmware), or every
+/// problem kind with the feature `rtm`.
+#[cfg(not(feature = "rtm"))]
+type Linked = MogiOnly;
+#[cfg(feature = "rtm")]
+type Linked = AnyProblem;
 
 /// Times each part of the inversion is repeated on the last valid observation for the split.
 const SPLIT_REPEAT: u32 = 32;
@@ -71,7 +82,7 @@ pub fn run() -> bool {
         parse.add(clock.since(t0));
         let result = parsed.and_then(|day| {
             let t = clock.now();
-            let r = invert_at::<f32>(model, &obs[..n_obs], day, ws);
+            let r = invert_at_for::<f32, Linked>(model, &obs[..n_obs], day, ws);
             let dt = clock.since(t);
             r.map(|inv| (inv, dt, day)).map_err(LineError::Invert)
         });
@@ -161,13 +172,13 @@ fn stdin() -> Option<&'static mut Stdin> {
     cortex_m::singleton!(: Stdin = Stdin::open())
 }
 
-/// Decodes the embedded model into a static. Decoding needs several kilobytes of temporaries;
-/// they live only in this function's frame.
+/// Decodes the embedded model into a static (Mogi models only unless the feature `rtm` links the
+/// RTM forward model).
 #[inline(never)]
 fn load_model() -> Option<Result<&'static Model<'static>, magic_core::Error>> {
     let slot: &'static mut Option<Model<'static>> =
         cortex_m::singleton!(: Option<Model<'static>> = None)?;
-    match Model::decode(MODEL) {
+    match Model::decode_for::<Linked>(MODEL) {
         Ok(m) => Some(Ok(slot.insert(m))),
         Err(e) => Some(Err(e)),
     }
@@ -190,9 +201,7 @@ struct Split {
 }
 
 /// Times the encoder, the forward model and the correction separately on one observation, each
-/// [`SPLIT_REPEAT`] times, with the calls [`invert_at`] makes (the correction runs through
-/// `model_encoder` on a copy of the model whose encoder is the correction, so that it uses the
-/// same working memory).
+/// [`SPLIT_REPEAT`] times, with the calls [`invert_at_for`] makes.
 #[inline(never)]
 fn measure_split(
     model: &Model<'_>,
@@ -214,8 +223,6 @@ fn measure_split(
     let mut physics = [0f32; MAX_OBS];
     let mut y = [0f32; MAX_OBS];
     let (mut enc, mut mogi, mut corr) = (Stat::default(), Stat::default(), Stat::default());
-    let mut correction = model.clone();
-    correction.encoder = model.decoder.clone();
     for _ in 0..SPLIT_REPEAT {
         let t = clock.now();
         model_encoder(model, &z[..n_obs], &mut unit[..n_params], ws).ok()?;
@@ -228,14 +235,14 @@ fn measure_split(
             params[i] = lo + (hi - lo) * unit[i];
         }
         let t = clock.now();
-        forward::<f32>(model, &params[..n_params], day, &mut physics[..n_obs]).ok()?;
+        forward_for::<f32, Linked>(model, &params[..n_params], day, &mut physics[..n_obs]).ok()?;
         mogi.add(clock.since(t));
         if model.variant == Variant::C {
             for (i, v) in physics[..n_obs].iter_mut().enumerate() {
                 *v = (*v - model.obs_mean.get(i)) / model.obs_scale.get(i);
             }
             let t = clock.now();
-            model_encoder(&correction, &physics[..n_obs], &mut y[..n_obs], ws).ok()?;
+            model_decoder(model, &physics[..n_obs], &mut y[..n_obs], ws).ok()?;
             corr.add(clock.since(t));
         }
     }

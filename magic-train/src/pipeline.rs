@@ -7,24 +7,34 @@ use crate::nets::Net;
 use crate::physics::{MogiPhysics, Physics};
 use crate::train::{train, Rows, TrainConfig, TrainLog};
 use anyhow::{anyhow, Result};
-use magic_core::model_file::Problem;
-use magic_core::mogi::{Station, PAPER_BOUNDS};
+use crate::data::rtm_tables::intern;
+use magic_core::model_file::{Names, Problem};
+use magic_core::mogi::{Station, Stations, PAPER_BOUNDS, STATION_BYTES};
 use magic_core::{invert_at, Model, Variant, Workspace};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::sync::Arc;
 
-/// The Mogi problem description of a network.
+/// The Mogi problem description of a network (stations and names interned: `'static` bytes in
+/// the layout of the model file).
 pub fn mogi_problem(names: &[String], stations: &[Station]) -> Result<Problem<'static>> {
-    let mut v = heapless::Vec::new();
-    let mut n = heapless::Vec::new();
-    for (name, s) in names.iter().zip(stations) {
-        v.push(*s).map_err(|_| anyhow!("more stations than the core supports ({})", magic_core::model_file::MAX_STATIONS))?;
-        let mut hs = heapless::String::new();
-        hs.push_str(name).map_err(|_| anyhow!("station name `{name}` is longer than 8 characters"))?;
-        n.push(hs).map_err(|_| anyhow!("too many stations"))?;
+    let max = magic_core::model_file::MAX_STATIONS;
+    if stations.len() > max || names.len() > max {
+        return Err(anyhow!("more stations than the core supports ({max})"));
     }
-    Ok(Problem::Mogi { stations: v, names: n })
+    if names.len() != stations.len() {
+        return Err(anyhow!("{} station names for {} stations", names.len(), stations.len()));
+    }
+    for name in names {
+        if name.is_empty() || name.len() > magic_core::model_file::MAX_NAME || name.contains(',') {
+            return Err(anyhow!("station name `{name}` is empty, longer than 8 bytes or contains a comma"));
+        }
+    }
+    let mut bytes = vec![0u8; STATION_BYTES * stations.len()];
+    Stations::encode(stations, &mut bytes).map_err(|e| anyhow!("{e}"))?;
+    let joined = intern(names.join(",").into_bytes());
+    let names = std::str::from_utf8(joined).map_err(|e| anyhow!("station names: {e}"))?;
+    Ok(Problem::Mogi { stations: Stations(intern(bytes)), names: Names(names) })
 }
 
 /// Trains a Mogi model of `variant` on `data` and returns it as an f32 model with its log.

@@ -119,16 +119,34 @@ fn rustc() -> String {
 /// the same path whatever the model.
 static BUILD: Mutex<()> = Mutex::new(());
 
+/// The firmware features a model needs: `rtm` for an RTM model (the default firmware links only
+/// the Mogi forward model and holds the 48 KiB budget). A file that does not decode gets the
+/// default firmware, which reports it (`error,model: …`).
+pub fn firmware_features(model: &[u8]) -> Vec<&'static str> {
+    match magic_core::Model::decode(model) {
+        Ok(m) if matches!(m.problem, magic_core::Problem::Rtm { .. }) => vec!["rtm"],
+        _ => vec![],
+    }
+}
+
 /// Builds the firmware with `model_path` embedded (`cargo build -p magic-firmware --target
-/// thumbv7em-none-eabihf --profile mcu`, `MAGIC_MODEL` set) and returns the path of a copy of
-/// the ELF that belongs to this model (so that later builds with other models do not replace it).
+/// thumbv7em-none-eabihf --profile mcu`, `MAGIC_MODEL` set, the features of
+/// [`firmware_features`]) and returns the path of a copy of the ELF that belongs to this model
+/// (so that later builds with other models do not replace it).
 pub fn build_firmware(model_path: &Path) -> Result<PathBuf> {
+    build_firmware_with(model_path, &[])
+}
+
+/// [`build_firmware`] with extra firmware features (e.g. `panic-never`).
+pub fn build_firmware_with(model_path: &Path, extra_features: &[&str]) -> Result<PathBuf> {
     let model_path = model_path
         .canonicalize()
         .with_context(|| format!("model file {}", model_path.display()))?;
     let model =
         std::fs::read(&model_path).with_context(|| format!("reading {}", model_path.display()))?;
     let root = workspace_root()?;
+    let mut features = firmware_features(&model);
+    features.extend_from_slice(extra_features);
     let _guard = BUILD.lock().unwrap_or_else(|e| e.into_inner());
     let out = Command::new(cargo())
         .current_dir(&root)
@@ -141,6 +159,7 @@ pub fn build_firmware(model_path: &Path) -> Result<PathBuf> {
             "--profile",
             PROFILE,
         ])
+        .args(["--features", &features.join(",")])
         .args(["--message-format", "json-render-diagnostics"])
         .env("MAGIC_MODEL", &model_path)
         .stderr(Stdio::inherit())
@@ -158,7 +177,8 @@ pub fn build_firmware(model_path: &Path) -> Result<PathBuf> {
     // Builds from other processes are not serialised with this one: run one at a time.
     let dir = elf.parent().unwrap_or(Path::new(".")).join("by-model");
     std::fs::create_dir_all(&dir)?;
-    let copy = dir.join(format!("magic-firmware-{:016x}.elf", fnv1a(&model)));
+    let key = fnv1a(&[model.as_slice(), features.join(",").as_bytes()].concat());
+    let copy = dir.join(format!("magic-firmware-{key:016x}.elf"));
     std::fs::copy(&elf, &copy)
         .with_context(|| format!("copying {} to {}", elf.display(), copy.display()))?;
     Ok(copy)

@@ -7,7 +7,7 @@
 //! Needs `qemu-system-arm` and the Rust target `thumbv7em-none-eabihf`; without them the test
 //! fails with a message saying how to install them, unless `MAGIC_SKIP_QEMU=1`.
 
-use magic_core::model_file::{Model, Problem, Variant};
+use magic_core::model_file::{Model, Variant};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::nn::Activation;
 use magic_train::export::{OwnedLayer, OwnedModel, OwnedWeights};
@@ -95,13 +95,8 @@ fn model_bytes() -> Vec<u8> {
             v.sqrt().max(1e-3)
         })
         .collect();
-    let names = (0..N_STATIONS)
-        .map(|i| heapless::String::try_from(format!("S{i:02}").as_str()).unwrap())
-        .collect();
-    let problem = Problem::Mogi {
-        stations: st.iter().copied().collect(),
-        names,
-    };
+    let names: Vec<String> = (0..N_STATIONS).map(|i| format!("S{i:02}")).collect();
+    let problem = magic_train::pipeline::mogi_problem(&names, &st).unwrap();
     let f32_model = OwnedModel {
         variant: Variant::C,
         problem,

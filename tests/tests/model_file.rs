@@ -90,8 +90,8 @@ fn wrong_version_problem_and_sizes() {
     // Sizes that do not fit the network: one station fewer than the observation count.
     let mut own = random_mogi_model(Variant::B, 2);
     if let Problem::Mogi { stations, names } = &mut own.problem {
-        stations.pop();
-        names.pop();
+        stations.0 = &stations.0[..stations.0.len() - magic_core::mogi::STATION_BYTES];
+        names.0 = names.0.rsplit_once(',').unwrap().0;
     }
     let e = own.encode().unwrap_err().to_string();
     assert!(e.contains("observations"), "{e}");

@@ -264,8 +264,10 @@ pub fn intern(bytes: Vec<u8>) -> &'static [u8] {
 pub fn owned_problem(p: &Problem<'_>) -> Problem<'static> {
     match p {
         Problem::Mogi { stations, names } => Problem::Mogi {
-            stations: stations.clone(),
-            names: names.clone(),
+            stations: magic_core::mogi::Stations(intern(stations.0.to_vec())),
+            names: magic_core::model_file::Names(
+                std::str::from_utf8(intern(names.0.as_bytes().to_vec())).unwrap_or_default(),
+            ),
         },
         Problem::Rtm {
             geometry,

@@ -938,7 +938,7 @@ pub fn read_dir(
 /// Station names of a Mogi model, in its channel order.
 pub fn model_station_names(model: &Model<'_>) -> Result<Vec<String>> {
     match &model.problem {
-        Problem::Mogi { names, .. } => Ok(names.iter().map(|n| n.as_str().to_string()).collect()),
+        Problem::Mogi { names, .. } => Ok(names.iter().map(|n| n.to_string()).collect()),
         Problem::Rtm { .. } => bail!("the model is not a GNSS (Mogi) model: it has no stations"),
     }
 }
