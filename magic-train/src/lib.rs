@@ -15,6 +15,7 @@ pub mod physics;
 pub mod plots;
 pub mod records;
 pub mod reproduce;
+pub mod residuals;
 pub mod rtm_cli;
 pub mod rtm_physics;
 pub mod rtm_pipeline;

@@ -5,7 +5,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use magic_core::{Model, Variant};
 use magic_train::data::{self, gnss::GnssData};
 use magic_core::model_file::Problem;
-use magic_train::{demo, evaluate, pipeline, records, rtm_cli, synth, OwnedModel, TrainConfig};
+use magic_train::{demo, evaluate, pipeline, records, residuals, rtm_cli, synth, OwnedModel, TrainConfig};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -118,6 +118,51 @@ enum Cmd {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+    },
+    /// Residual analysis: fit each effect family to the residuals of a model (observation − F(E(x)))
+    /// and rank the families by the share of residual variance they explain on held-out data
+    /// beyond chance.
+    Residuals {
+        /// Model file (variant B or C).
+        #[arg(long)]
+        model: PathBuf,
+        /// Data folder laid out like `shared/data/gnss` (default as for `eval`).
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Split the families are fitted on (the fitted families are scored on the others).
+        #[arg(long, default_value = "train")]
+        split: String,
+        /// Surrogates per family for the chance level.
+        #[arg(long, default_value_t = 20)]
+        surrogates: usize,
+        /// Seed of the surrogates.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Write the ranked families as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Write `effects.svg` and `stations.svg` into this folder.
+        #[arg(long)]
+        plots: Option<PathBuf>,
+    },
+    /// Check the residual analysis on synthetic data: for every scenario and seed, generate the
+    /// data, train a B model briefly, analyse it and compare with the injected truth.
+    SynthCheck {
+        /// Number of seeds per scenario (seeds first-seed, first-seed + 1, …).
+        #[arg(long, default_value_t = 10)]
+        seeds: u64,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        first_seed: u64,
+        /// Scenarios, comma-separated (default: all).
+        #[arg(long, value_delimiter = ',')]
+        scenarios: Vec<String>,
+        /// Training epochs of the B models.
+        #[arg(long, default_value_t = 15)]
+        epochs: usize,
+        /// Write every analysis and its comparison with the truth as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
     },
     /// Reproduce a table of the paper over several seeds (mean ± std).
     Reproduce {
@@ -455,6 +500,53 @@ fn run(cli: Cli) -> Result<()> {
             synth::write_dir(&s.data, &out)?;
             std::fs::write(out.join("truth.json"), serde_json::to_string_pretty(&s.truth)?)?;
             eprintln!("wrote synthetic dataset ({}) -> {}", s.data.source, out.display());
+        }
+        Cmd::Residuals { model, data_dir, split, surrogates, seed, json, plots } => {
+            let data = load_gnss(data_dir.as_deref())?;
+            let bytes = read_model(&model)?;
+            let m = decode(&model, &bytes)?;
+            let opts = residuals::AnalysisOptions { split, surrogates, seed, ..Default::default() };
+            let a = residuals::analyse(&m, &data, &opts)?;
+            print!("{}", a.table());
+            eprintln!("analysis took {:.2} s", a.seconds);
+            if let Some(p) = json {
+                std::fs::write(&p, serde_json::to_string_pretty(&a.to_json())?).with_context(|| format!("{}: cannot write", p.display()))?;
+            }
+            if let Some(d) = plots {
+                residuals::write_plots(&a, &d)?;
+                eprintln!("plots -> {}", d.display());
+            }
+        }
+        Cmd::SynthCheck { seeds, first_seed, scenarios, epochs, json } => {
+            let scs: Vec<synth::Scenario> = if scenarios.is_empty() {
+                synth::Scenario::ALL.to_vec()
+            } else {
+                scenarios.iter().map(|s| synth::Scenario::parse(s)).collect::<Result<_>>()?
+            };
+            let cfg = TrainConfig { epochs, progress: false, ..TrainConfig::gnss() };
+            let opts = residuals::AnalysisOptions::default();
+            let mut rows = Vec::new();
+            let mut out = Vec::new();
+            for sc in scs {
+                for seed in first_seed..first_seed + seeds {
+                    let (r, a) = residuals::check_one(sc, seed, &cfg, &opts)?;
+                    eprintln!(
+                        "{:<14} seed {:>3}: top {:<14} {}  {}",
+                        sc.name(),
+                        seed,
+                        r.top,
+                        if r.ok() { "ok  " } else { "FAIL" },
+                        r.detail
+                    );
+                    out.push(serde_json::json!({"scenario": sc.name(), "seed": seed, "ok": r.ok(), "ranked_first": r.ranked_first,
+                        "significant": r.significant, "params_ok": r.params_ok, "detail": r.detail, "analysis": a.to_json()}));
+                    rows.push(r);
+                }
+            }
+            print!("{}", residuals::recovery_table(&rows));
+            if let Some(p) = json {
+                std::fs::write(&p, serde_json::to_string_pretty(&out)?).with_context(|| format!("{}: cannot write", p.display()))?;
+            }
         }
         Cmd::Reproduce { problem, data_dir, tables, variants, seeds, epochs, json } => {
             if problem == "rtm" {
