@@ -10,7 +10,7 @@ use crate::synth;
 use crate::train::{TrainConfig, TrainLog};
 use anyhow::{anyhow, Context, Result};
 use magic_core::mogi::PARAM_NAMES;
-use magic_core::{invert, Model, Variant, Workspace};
+use magic_core::{invert_at, Model, Variant, Workspace};
 use serde_json::json;
 use std::path::Path;
 
@@ -149,7 +149,7 @@ pub fn plausibility(model: &Model<'_>, rows: &[ObsRow]) -> Result<(f64, f64, f64
     let (mut peak, mut depth, mut ok, mut n) = (f64::NEG_INFINITY, 0.0, 0usize, 0usize);
     for r in rows {
         let Ok(obs) = &r.obs else { continue };
-        let inv = invert::<f64>(model, obs, &mut ws).map_err(|e| anyhow!("{e}"))?;
+        let inv = invert_at::<f64>(model, obs, r.day(), &mut ws).map_err(|e| anyhow!("{e}"))?;
         let (d, dv) = (inv.params[2], inv.params[3]);
         if dv > peak {
             peak = dv;

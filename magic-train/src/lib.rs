@@ -4,6 +4,7 @@
 //! as a differentiable op, training, int8 export, evaluation and the `magic` command line.
 
 pub mod classical;
+pub mod closed_loop;
 pub mod data;
 pub mod demo;
 pub mod demo_qemu;

@@ -239,6 +239,30 @@ enum Cmd {
         #[arg(long)]
         csv: Option<PathBuf>,
     },
+    /// Close the loop: train, trace the residual to a missing effect, add it to F, retrain, report.
+    Loop {
+        /// Problem (`mogi`).
+        #[arg(long, default_value = "mogi")]
+        problem: String,
+        /// Data folder (default: $MAGIC_DATA/gnss, ../shared/data/gnss).
+        #[arg(long)]
+        data_dir: Option<PathBuf>,
+        /// Report folder (Markdown, JSON, PNG).
+        #[arg(long, default_value = "out/loop")]
+        report: PathBuf,
+        /// Training seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Maximum epochs per training.
+        #[arg(long, default_value_t = 100)]
+        epochs: usize,
+        /// Most effects to add.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Skip the classical per-day fit.
+        #[arg(long)]
+        no_classical: bool,
+    },
     /// The main job: train C and B, evaluate, export int8, run the test days on the firmware.
     Demo {
         /// Data folder laid out like `shared/data/gnss` (default: $MAGIC_DATA/gnss, ../shared/data/gnss,
@@ -576,6 +600,21 @@ fn run(cli: Cli) -> Result<()> {
             let grid = magic_train::classical::parse_grid(&grid)?;
             let data = load_gnss(data_dir.as_deref())?;
             magic_train::classical::run(&data, &split, &effects, &grid, json.as_deref(), csv.as_deref())?;
+        }
+        Cmd::Loop { problem, data_dir, report, seed, epochs, rounds, no_classical } => {
+            if problem != "mogi" {
+                bail!("loop --problem {problem}: only `mogi` is supported (the RTM loop needs per-spectrum illumination effects)");
+            }
+            let data = load_gnss(data_dir.as_deref())?;
+            let opts = magic_train::closed_loop::LoopOptions {
+                seed,
+                train: TrainConfig { epochs, ..TrainConfig::gnss() },
+                max_rounds: rounds,
+                classical: !no_classical,
+            };
+            let r = magic_train::closed_loop::run(&data, &opts, &report)?;
+            print!("{}", std::fs::read_to_string(report.join("report.md"))?.split("\n## ").next().unwrap_or(""));
+            eprintln!("{} rounds; report in {}", r.len(), report.display());
         }
         Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
             demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
