@@ -10,7 +10,7 @@
 
 use crate::effects::mogi_with_effects_of;
 use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
-use crate::nn::{run, Scratch};
+use crate::nn::{run, run_scratch, Scratch};
 use crate::rtm::inform::crown_from_cover;
 use crate::rtm::N_LEARNED;
 use crate::{Error, Real};
@@ -105,16 +105,49 @@ pub fn invert_at<R: Real>(
 
 /// [`invert_at`] in a build that links only the forward models of `P` (see
 /// [`crate::model_file::Problems`]; the firmware uses [`crate::model_file::MogiOnly`]).
-///
-/// Everything after the networks is computed in `R` (f32 on the board, no soft-float f64):
-/// the bounds mapping, the forward model, the destandardisation and the residual, which is
-/// converted to `f64` once at the end.
 pub fn invert_at_for<R: Real, P: Problems>(
     model: &Model<'_>,
     obs: &[f32],
     t_day: f64,
     ws: &mut Workspace,
 ) -> Result<Inversion<R>, Error> {
+    let mut out = Inversion::empty();
+    invert_into::<R, P>(model, obs, t_day, ws, &mut out)?;
+    Ok(out)
+}
+
+impl<R: Real> Inversion<R> {
+    /// An inversion with no variables and every array zero (to be filled by [`invert_into`]).
+    pub fn empty() -> Self {
+        Inversion {
+            n_params: 0,
+            params: [R::zero(); MAX_PARAMS],
+            unit: [0f32; MAX_PARAMS],
+            n_obs: 0,
+            physics: [R::zero(); MAX_OBS],
+            recon: [R::zero(); MAX_OBS],
+            residual_rms: 0.0,
+            residual_rms_std: 0.0,
+            flags: Flags::default(),
+            used: 0,
+        }
+    }
+}
+
+/// [`invert_at_for`] writing into `out` in place (the firmware's path: no ~1 KB result to copy).
+/// On success the first `n_params` / `n_obs` entries of `out`'s arrays are this inversion's; the
+/// entries after them keep what they held. On error `out` holds no valid inversion.
+///
+/// Everything after the networks is computed in `R` (f32 on the board, no soft-float f64): the
+/// bounds mapping, the forward model, the destandardisation and the residual, which is
+/// converted to `f64` once at the end.
+pub fn invert_into<R: Real, P: Problems>(
+    model: &Model<'_>,
+    obs: &[f32],
+    t_day: f64,
+    ws: &mut Workspace,
+    out: &mut Inversion<R>,
+) -> Result<(), Error> {
     let n_obs = model.n_obs();
     if obs.len() != n_obs || n_obs > MAX_OBS {
         return Err(Error::SizeMismatch {
@@ -123,11 +156,29 @@ pub fn invert_at_for<R: Real, P: Problems>(
             found: obs.len(),
         });
     }
+    // Channel i belongs to station i mod S (components E, N, U of S stations), or is its own
+    // group (RTM bands): bit g of `used` is set when group g has an observed channel.
+    let groups = match &model.problem {
+        Problem::Mogi { stations, .. } => stations.len(),
+        Problem::Rtm { .. } => n_obs,
+    };
+    let per_group = n_obs / groups.max(1);
+    let track = groups <= 32 && (per_group == 3 || groups == n_obs);
+    let mut used = 0u32;
+    let mut g = 0usize;
     let mut z = [0f32; MAX_OBS];
     let mut observed = 0usize;
     for (i, (&x, zi)) in obs.iter().zip(z.iter_mut()).enumerate() {
+        let bit = 1u32.wrapping_shl(g as u32);
+        g += 1;
+        if g >= groups {
+            g = 0;
+        }
         if x.is_nan() {
             continue;
+        }
+        if track {
+            used |= bit;
         }
         if x.is_infinite() {
             return Err(Error::NonFinite {
@@ -155,34 +206,9 @@ pub fn invert_at_for<R: Real, P: Problems>(
     if observed < n_obs {
         flags.0 |= Flags::MISSING;
     }
-    let groups = match &model.problem {
-        Problem::Mogi { stations, .. } => stations.len(),
-        Problem::Rtm { .. } => n_obs,
-    };
-    let per_group = n_obs / groups.max(1);
-    let mut used = 0u32;
-    if groups <= 32 {
-        for (i, x) in obs.iter().enumerate() {
-            if !x.is_nan() {
-                let g = if per_group == 3 { i % groups.max(1) } else { i };
-                used |= 1u32.wrapping_shl(g as u32);
-            }
-        }
-    }
 
-    let mut out = Inversion {
-        n_params: 0,
-        params: [R::zero(); MAX_PARAMS],
-        unit: [0f32; MAX_PARAMS],
-        n_obs,
-        physics: [R::zero(); MAX_OBS],
-        recon: [R::zero(); MAX_OBS],
-        residual_rms: 0.0,
-        residual_rms_std: 0.0,
-        flags,
-        used,
-    };
-    let mut at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, &mut out)?;
+    out.n_obs = n_obs;
+    let mut at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, out)?;
     if observed < n_obs {
         // Missing channels: refill them with the model's own reconstruction and invert again.
         for _ in 0..IMPUTE_PASSES {
@@ -191,7 +217,7 @@ pub fn invert_at_for<R: Real, P: Problems>(
                     *zi = (R::value(*r) as f32 - model.obs_mean.get(i)) / model.obs_scale.get(i);
                 }
             }
-            at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, &mut out)?;
+            at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, out)?;
         }
     }
     out.n_params = n_params;
@@ -207,7 +233,7 @@ pub fn invert_at_for<R: Real, P: Problems>(
         }
     }
     if at_bound {
-        out.flags.0 |= Flags::AT_BOUND;
+        flags.0 |= Flags::AT_BOUND;
     }
 
     // The residual over the observed channels, in R.
@@ -226,11 +252,13 @@ pub fn invert_at_for<R: Real, P: Problems>(
     let rms = (ss / n).sqrt();
     let rms_std = (ss_std / n).sqrt();
     if model.residual_threshold > 0.0 && rms_std > R::c(model.residual_threshold as f64) {
-        out.flags.0 |= Flags::HIGH_RESIDUAL;
+        flags.0 |= Flags::HIGH_RESIDUAL;
     }
     out.residual_rms = rms.value();
     out.residual_rms_std = rms_std.value();
-    Ok(out)
+    out.flags = flags;
+    out.used = used;
+    Ok(())
 }
 
 /// Extra passes for a day with missing channels: each refills the missing channels with the
@@ -239,7 +267,8 @@ pub fn invert_at_for<R: Real, P: Problems>(
 pub const IMPUTE_PASSES: usize = 3;
 
 /// One encoder → F → C pass on standardised observations, writing `params`, `unit`, `physics`
-/// and `recon` of `out` in place; returns whether a variable sits at its bound.
+/// and `recon` of `out` in place; returns whether a variable sits at its bound. The networks
+/// read their inputs from and leave their outputs in the working memory (no copies).
 fn pass<R: Real, P: Problems>(
     model: &Model<'_>,
     z: &[f32],
@@ -252,14 +281,16 @@ fn pass<R: Real, P: Problems>(
     let unit = &mut out.unit[..n_params];
     model_encoder(model, z, unit, ws)?;
     let mut at_bound = false;
-    let mut y = [0f32; MAX_OBS];
     match model.variant {
         Variant::A => {
             for (p, u) in out.params.iter_mut().zip(unit.iter()) {
                 *p = R::c(*u as f64);
             }
-            run(&model.decoder, unit, &mut y[..n_obs], &mut ws.nn)?;
-            destandardise(model, &y[..n_obs], &mut out.recon[..n_obs]);
+            out.physics[..n_obs].fill(R::zero());
+            let input = ws.nn.input();
+            input[..n_params].copy_from_slice(unit);
+            let y = run_scratch(&model.decoder, n_params, &mut ws.nn)?;
+            destandardise(model, y, &mut out.recon[..n_obs])?;
         }
         Variant::B | Variant::C => {
             for ((p, u), b) in out.params.iter_mut().zip(unit.iter()).zip(&model.bounds) {
@@ -274,12 +305,12 @@ fn pass<R: Real, P: Problems>(
                 &mut out.physics[..n_obs],
             )?;
             if model.variant == Variant::C {
-                let mut fz = [0f32; MAX_OBS];
-                for (i, (f, p)) in fz.iter_mut().zip(&out.physics[..n_obs]).enumerate() {
+                let input = ws.nn.input();
+                for (i, (f, p)) in input.iter_mut().zip(&out.physics[..n_obs]).enumerate() {
                     *f = (R::value(*p) as f32 - model.obs_mean.get(i)) / model.obs_scale.get(i);
                 }
-                run(&model.decoder, &fz[..n_obs], &mut y[..n_obs], &mut ws.nn)?;
-                destandardise(model, &y[..n_obs], &mut out.recon[..n_obs]);
+                let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
+                destandardise(model, y, &mut out.recon[..n_obs])?;
             } else {
                 out.recon[..n_obs].copy_from_slice(&out.physics[..n_obs]);
             }
@@ -353,8 +384,16 @@ pub fn forward_for<R: Real, P: Problems>(
 
 /// Destandardises network outputs into R (`x = y · scale + mean`, computed in f32 as the
 /// network's outputs are).
-fn destandardise<R: Real>(model: &Model<'_>, y: &[f32], out: &mut [R]) {
+fn destandardise<R: Real>(model: &Model<'_>, y: &[f32], out: &mut [R]) -> Result<(), Error> {
+    if y.len() != out.len() {
+        return Err(Error::SizeMismatch {
+            what: "network output",
+            expected: out.len(),
+            found: y.len(),
+        });
+    }
     for (i, (o, v)) in out.iter_mut().zip(y).enumerate() {
         *o = R::c((v * model.obs_scale.get(i) + model.obs_mean.get(i)) as f64);
     }
+    Ok(())
 }

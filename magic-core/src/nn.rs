@@ -6,9 +6,10 @@
 //! stay in int8 between layers (integer requantisation); an int8 layer followed by an f32 layer,
 //! or the last layer, dequantises to f32.
 
-#[cfg(not(all(feature = "dsp", target_arch = "arm")))]
-use crate::quant::dot_i8;
-use crate::quant::{quantize, requantize, LeF32, LeI32};
+use crate::quant::{
+    matvec_i8_packed, pack_i8_pairs, pack_word, packed_set, packed_words, quantize,
+    requantize_floor, LeF32, LeI32,
+};
 use crate::Error;
 use serde::{Deserialize, Serialize};
 
@@ -206,23 +207,23 @@ pub fn validate_chain(layers: &[Layer<'_>], input: usize, output: usize) -> Resu
     Ok(())
 }
 
-/// Working memory for [`run`]: two f32 and two int8 buffers of [`MAX_WIDTH`] (and, with the
-/// `dsp` feature on ARM, the int8 activations packed in pairs for the `SMLAD` kernel).
+/// Working memory for [`run`]: two f32 buffers of [`MAX_WIDTH`], two buffers of int8
+/// activations of [`MAX_WIDTH`], packed as sign-extended 16-bit pairs (the layout of
+/// [`crate::quant::pack_i8_pairs`], which the `SMLAD` kernel reads; the same layout on every
+/// target, so the board and the host run the same code), and the i32 accumulators of a layer.
 #[derive(Clone, Debug)]
 pub struct Scratch {
     f: [[f32; MAX_WIDTH]; 2],
-    q: [[i8; MAX_WIDTH]; 2],
-    #[cfg(all(feature = "dsp", target_arch = "arm"))]
-    xp: [u32; crate::quant::packed_words(MAX_WIDTH)],
+    q: [[u32; packed_words(MAX_WIDTH)]; 2],
+    acc: [i32; MAX_WIDTH],
 }
 
 impl Default for Scratch {
     fn default() -> Self {
         Scratch {
             f: [[0.0; MAX_WIDTH]; 2],
-            q: [[0; MAX_WIDTH]; 2],
-            #[cfg(all(feature = "dsp", target_arch = "arm"))]
-            xp: [0; crate::quant::packed_words(MAX_WIDTH)],
+            q: [[0; packed_words(MAX_WIDTH)]; 2],
+            acc: [0; MAX_WIDTH],
         }
     }
 }
@@ -242,10 +243,102 @@ fn activate(x: f32, act: Activation) -> f32 {
     }
 }
 
+/// Quantises `x` (f32) with the inverse scale `inv` into packed int8 activations `xp`.
+fn quantize_packed(x: &[f32], inv: f32, xp: &mut [u32]) {
+    let mut groups = x.chunks_exact(4);
+    let mut words = xp.chunks_exact_mut(2);
+    for (g, w) in (&mut groups).zip(&mut words) {
+        let q = |j: usize| quantize(g[j], inv) as u8;
+        let word = u32::from_le_bytes([q(0), q(1), q(2), q(3)]);
+        [w[0], w[1]] = pack_word(word);
+    }
+    let base = x.len() - groups.remainder().len();
+    for (k, &v) in groups.remainder().iter().enumerate() {
+        packed_set(xp, base + k, quantize(v, inv));
+    }
+}
+
+/// Little-endian i32 of four bytes (a chunk of exactly four; anything else reads as 0).
+#[inline(always)]
+fn le_i32(b: &[u8]) -> i32 {
+    match *b {
+        [b0, b1, b2, b3] => i32::from_le_bytes([b0, b1, b2, b3]),
+        _ => 0,
+    }
+}
+
+/// Where an int8 layer writes its rows.
+enum Dest<'a> {
+    /// Requantised int8 for the next int8 layer (packed), with ReLU when `relu`.
+    Int8 { xp: &'a mut [u32], relu: bool },
+    /// Dequantised f32, then the activation.
+    F32 { y: &'a mut [f32], act: Activation },
+}
+
+/// One int8 layer: `rows × cols` weights `w` (row-major; byte lengths checked by the caller) on
+/// packed activations `xp`. First every row's dot product into `acc` (the row-blocked kernel,
+/// two rows per activation load), then one pass over the rows adding the bias and requantising
+/// (four rows per pair of packed words) or dequantising.
+#[allow(clippy::too_many_arguments)]
+fn int8_layer(
+    w: &[u8],
+    rows: usize,
+    cols: usize,
+    xp: &[u32],
+    acc: &mut [i32],
+    bias: &[u8],
+    mult: &[u8],
+    shift: &[u8],
+    w_scale: &[u8],
+    in_scale: f32,
+    dest: Dest<'_>,
+) {
+    let rows = rows.min(acc.len());
+    matvec_i8_packed(w, rows, cols, xp, acc);
+    let acc = &acc[..rows];
+    match dest {
+        Dest::Int8 { xp: out, relu } => {
+            // One row per iteration into int8 (a simple loop the compiler keeps in registers),
+            // then the packing, four rows per pair of words.
+            let floor = if relu { 0 } else { -127 };
+            let mut q = [0i8; MAX_WIDTH];
+            for ((((o, &a), b), m), &sh) in q
+                .iter_mut()
+                .zip(acc)
+                .zip(bias.chunks_exact(4))
+                .zip(mult.chunks_exact(4))
+                .zip(shift)
+            {
+                *o = requantize_floor(a.saturating_add(le_i32(b)), le_i32(m), sh as i8, floor);
+            }
+            pack_i8_pairs(&q[..rows.min(MAX_WIDTH)], out);
+        }
+        Dest::F32 { y, act } => {
+            for (((o, &a), b), ws) in y
+                .iter_mut()
+                .zip(acc)
+                .zip(bias.chunks_exact(4))
+                .zip(w_scale.chunks_exact(4))
+            {
+                let a = a.saturating_add(le_i32(b));
+                let s = f32::from_bits(le_i32(ws) as u32);
+                *o = activate(a as f32 * (s * in_scale), act);
+            }
+        }
+    }
+}
+
+impl Scratch {
+    /// The input buffer of [`run_scratch`]: write the network's inputs to its first entries.
+    pub fn input(&mut self) -> &mut [f32; MAX_WIDTH] {
+        &mut self.f[0]
+    }
+}
+
 /// Runs a validated chain of layers on `input`, writing the last layer's outputs to `output`.
 ///
-/// Layers must have passed [`validate_chain`]; sizes are checked again here (cheaply) so that a
-/// mistake returns an error instead of reading out of bounds.
+/// Layers must have passed [`validate_chain`]; sizes and byte lengths are checked again here
+/// (cheaply) so that a mistake returns an error instead of reading out of bounds.
 pub fn run(
     layers: &[Layer<'_>],
     input: &[f32],
@@ -253,6 +346,33 @@ pub fn run(
     s: &mut Scratch,
 ) -> Result<(), Error> {
     let n_in = input.len();
+    let Some(dst) = s.input().get_mut(..n_in) else {
+        return Err(Error::SizeMismatch {
+            what: "network input",
+            expected: MAX_WIDTH,
+            found: n_in,
+        });
+    };
+    dst.copy_from_slice(input);
+    let y = run_scratch(layers, n_in, s)?;
+    if output.len() != y.len() {
+        return Err(Error::SizeMismatch {
+            what: "network output",
+            expected: y.len(),
+            found: output.len(),
+        });
+    }
+    output.copy_from_slice(y);
+    Ok(())
+}
+
+/// [`run`] on the first `n_in` entries of [`Scratch::input`], returning the outputs in place (a
+/// slice of the working memory, valid until its next use).
+pub fn run_scratch<'s>(
+    layers: &[Layer<'_>],
+    n_in: usize,
+    s: &'s mut Scratch,
+) -> Result<&'s [f32], Error> {
     if n_in > MAX_WIDTH {
         return Err(Error::SizeMismatch {
             what: "network input",
@@ -260,22 +380,29 @@ pub fn run(
             found: n_in,
         });
     }
-    s.f[0][..n_in].copy_from_slice(input);
-    // Which representation holds the current activations: f32 buffer `cur` or int8 buffer `cur`.
+    // Which buffer holds the current activations, and whether they are the int8 (packed) ones.
     let mut cur = 0usize;
     let mut in_int8 = false;
     let mut width = n_in;
     for (i, l) in layers.iter().enumerate() {
         let (rows, cols) = (l.rows as usize, l.cols as usize);
-        if cols != width || rows > MAX_WIDTH {
+        if cols != width || rows > MAX_WIDTH || cols > MAX_WIDTH || cols == 0 {
             return Err(Error::SizeMismatch {
                 what: "layer inputs",
                 expected: width,
                 found: cols,
             });
         }
-        let next_int8 = layers.get(i + 1).is_some_and(|n| n.is_int8());
-        let nxt = 1 - cur;
+        let next = layers.get(i + 1);
+        let next_int8 = next.is_some_and(|n| n.is_int8());
+        let [f0, f1] = &mut s.f;
+        let [q0, q1] = &mut s.q;
+        let acc = &mut s.acc;
+        let ((f_src, f_dst), (q_src, q_dst)) = if cur == 0 {
+            ((f0, f1), (q0, q1))
+        } else {
+            ((f1, f0), (q1, q0))
+        };
         match l.weights {
             Weights::F32 { w, bias } => {
                 if in_int8 {
@@ -288,31 +415,24 @@ pub fn run(
                         found: w.0.len(),
                     });
                 }
-                let (a, b) = s.f.split_at_mut(1);
-                let (src, dst) = if cur == 0 {
-                    (&a[0], &mut b[0])
-                } else {
-                    (&b[0], &mut a[0])
-                };
-                for r in 0..rows {
+                let src = &f_src[..cols];
+                for (r, (d, row)) in f_dst[..rows]
+                    .iter_mut()
+                    .zip(w.0.chunks_exact(4 * cols))
+                    .enumerate()
+                {
                     let mut acc = bias.get(r);
-                    let row = &w.0[4 * r * cols..4 * (r + 1) * cols];
-                    for (wb, x) in row.chunks_exact(4).zip(&src[..cols]) {
+                    for (wb, x) in row.chunks_exact(4).zip(src) {
                         acc += f32::from_le_bytes([wb[0], wb[1], wb[2], wb[3]]) * x;
                     }
-                    dst[r] = activate(acc, l.act);
+                    *d = activate(acc, l.act);
                 }
-                if next_int8 {
-                    if let Some(Layer {
-                        weights: Weights::Int8 { in_scale, .. },
-                        ..
-                    }) = layers.get(i + 1)
-                    {
-                        let inv = 1.0 / in_scale;
-                        for r in 0..rows {
-                            s.q[nxt][r] = quantize(s.f[nxt][r], inv);
-                        }
-                    }
+                if let Some(Layer {
+                    weights: Weights::Int8 { in_scale, .. },
+                    ..
+                }) = next
+                {
+                    quantize_packed(&f_dst[..rows], 1.0 / in_scale, q_dst);
                     in_int8 = true;
                 }
             }
@@ -325,69 +445,73 @@ pub fn run(
                 in_scale,
                 ..
             } => {
-                if w.len() < rows * cols {
-                    return Err(Error::SizeMismatch {
-                        what: "int8 layer weight bytes",
-                        expected: rows * cols,
-                        found: w.len(),
-                    });
-                }
-                if next_int8 && shift.len() < rows {
-                    return Err(Error::SizeMismatch {
-                        what: "int8 layer shift bytes",
-                        expected: rows,
-                        found: shift.len(),
-                    });
+                let short = |what, have: usize, need: usize| {
+                    (have < need).then_some(Error::SizeMismatch {
+                        what,
+                        expected: need,
+                        found: have,
+                    })
+                };
+                let checks = [
+                    short("int8 layer weight bytes", w.len(), rows * cols),
+                    short("int8 layer bias bytes", bias.0.len(), 4 * rows),
+                    if next_int8 {
+                        short("int8 layer shift bytes", shift.len(), rows)
+                    } else {
+                        short("int8 layer scale bytes", w_scale.0.len(), 4 * rows)
+                    },
+                    if next_int8 {
+                        short("int8 layer multiplier bytes", mult.0.len(), 4 * rows)
+                    } else {
+                        None
+                    },
+                ];
+                if let Some(e) = checks.into_iter().flatten().next() {
+                    return Err(e);
                 }
                 if !in_int8 {
-                    let inv = 1.0 / in_scale;
-                    for c in 0..cols {
-                        s.q[cur][c] = quantize(s.f[cur][c], inv);
-                    }
+                    quantize_packed(&f_src[..cols], 1.0 / in_scale, q_src);
                 }
-                #[cfg(all(feature = "dsp", target_arch = "arm"))]
-                crate::quant::pack_i8_pairs(&s.q[cur][..cols], &mut s.xp);
-                for r in 0..rows {
-                    let row = &w[r * cols..(r + 1) * cols];
-                    #[cfg(all(feature = "dsp", target_arch = "arm"))]
-                    let dot = crate::quant::dot_i8_packed(row, &s.xp);
-                    #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
-                    let dot = dot_i8(row, &s.q[cur][..cols]);
-                    let acc = dot.saturating_add(bias.get(r));
-                    if next_int8 {
-                        let sh = shift[r] as i8;
-                        let mut q = requantize(acc, mult.get(r), sh);
-                        if l.act == Activation::Relu && q < 0 {
-                            q = 0;
-                        }
-                        s.q[nxt][r] = q;
-                    } else {
-                        let y = acc as f32 * (w_scale.get(r) * in_scale);
-                        s.f[nxt][r] = activate(y, l.act);
+                let dest = if next_int8 {
+                    Dest::Int8 {
+                        xp: q_dst,
+                        relu: l.act == Activation::Relu,
                     }
-                }
+                } else {
+                    Dest::F32 {
+                        y: &mut f_dst[..rows],
+                        act: l.act,
+                    }
+                };
+                int8_layer(
+                    w,
+                    rows,
+                    cols,
+                    &q_src[..packed_words(cols)],
+                    acc,
+                    bias.0,
+                    mult.0,
+                    shift,
+                    w_scale.0,
+                    in_scale,
+                    dest,
+                );
                 in_int8 = next_int8;
             }
         }
-        cur = nxt;
+        cur = 1 - cur;
         width = rows;
     }
     if in_int8 {
         return Err(Error::InvalidModel("network ends in int8"));
     }
-    if output.len() != width {
-        return Err(Error::SizeMismatch {
-            what: "network output",
-            expected: width,
-            found: output.len(),
-        });
-    }
-    output.copy_from_slice(&s.f[cur][..width]);
-    Ok(())
+    let [f0, f1] = &s.f;
+    Ok(&(if cur == 0 { f0 } else { f1 })[..width.min(MAX_WIDTH)])
 }
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
     use super::*;
 
     #[test]
@@ -421,9 +545,9 @@ mod tests {
             act: Activation::Relu,
             weights: Weights::Int8 {
                 w,
-                bias: LeI32(&[]),
-                w_scale: LeF32(&[]),
-                mult: LeI32(&[]),
+                bias: LeI32(&[0; 8]),
+                w_scale: LeF32(&[0, 0, 128, 63, 0, 0, 128, 63]),
+                mult: LeI32(&[0, 0, 0, 64, 0, 0, 0, 64]),
                 shift,
                 in_scale: 1.0,
                 out_scale: 1.0,
@@ -469,5 +593,177 @@ mod tests {
             &mut Scratch::default()
         )
         .is_ok());
+    }
+
+    /// The int8 path as the reference defines it: int8 activations in a plain buffer, the plain
+    /// dot product [`crate::quant::dot_i8`], [`crate::quant::requantize_reference`].
+    fn run_reference(layers: &[Layer<'_>], input: &[f32]) -> std::vec::Vec<f32> {
+        use crate::quant::{dot_i8, requantize_reference};
+        let mut f: std::vec::Vec<f32> = input.to_vec();
+        let mut q: std::vec::Vec<i8> = std::vec::Vec::new();
+        let mut in_int8 = false;
+        for (i, l) in layers.iter().enumerate() {
+            let (rows, cols) = (l.rows as usize, l.cols as usize);
+            let next = layers.get(i + 1);
+            match l.weights {
+                Weights::F32 { w, bias } => {
+                    let y: std::vec::Vec<f32> = (0..rows)
+                        .map(|r| {
+                            let mut acc = bias.get(r);
+                            for c in 0..cols {
+                                acc += LeF32(&w.0[4 * (r * cols + c)..]).get(0) * f[c];
+                            }
+                            activate(acc, l.act)
+                        })
+                        .collect();
+                    f = y;
+                    if let Some(Layer {
+                        weights: Weights::Int8 { in_scale, .. },
+                        ..
+                    }) = next
+                    {
+                        q = f.iter().map(|&v| quantize(v, 1.0 / in_scale)).collect();
+                        in_int8 = true;
+                    }
+                }
+                Weights::Int8 {
+                    w,
+                    bias,
+                    w_scale,
+                    mult,
+                    shift,
+                    in_scale,
+                    ..
+                } => {
+                    if !in_int8 {
+                        q = f.iter().map(|&v| quantize(v, 1.0 / in_scale)).collect();
+                    }
+                    let next_int8 = next.is_some_and(|n| n.is_int8());
+                    let accs: std::vec::Vec<i32> = (0..rows)
+                        .map(|r| {
+                            dot_i8(&w[r * cols..(r + 1) * cols], &q).saturating_add(bias.get(r))
+                        })
+                        .collect();
+                    if next_int8 {
+                        q = accs
+                            .iter()
+                            .enumerate()
+                            .map(|(r, &a)| {
+                                let v = requantize_reference(a, mult.get(r), shift[r] as i8);
+                                if l.act == Activation::Relu {
+                                    v.max(0)
+                                } else {
+                                    v
+                                }
+                            })
+                            .collect();
+                    } else {
+                        f = accs
+                            .iter()
+                            .enumerate()
+                            .map(|(r, &a)| activate(a as f32 * (w_scale.get(r) * in_scale), l.act))
+                            .collect();
+                    }
+                    in_int8 = next_int8;
+                }
+            }
+        }
+        f
+    }
+
+    /// A deterministic int8 chain `sizes[0] → … → sizes[n]` (ReLU between, linear at the end)
+    /// with byte arrays owned by the returned vector.
+    fn int8_chain(sizes: &[usize], seed: u64) -> std::vec::Vec<[std::vec::Vec<u8>; 5]> {
+        let mut x = seed | 1;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        sizes
+            .windows(2)
+            .map(|p| {
+                let (cols, rows) = (p[0], p[1]);
+                let w: std::vec::Vec<u8> = (0..rows * cols)
+                    .map(|_| ((next() % 255) as i32 - 127) as i8 as u8)
+                    .collect();
+                let bias = (0..rows)
+                    .flat_map(|_| ((next() % 20001) as i32 - 10000).to_le_bytes())
+                    .collect();
+                let w_scale = (0..rows)
+                    .flat_map(|_| (0.001 + (next() % 1000) as f32 * 1e-5).to_le_bytes())
+                    .collect();
+                let mut mult = std::vec::Vec::new();
+                let mut shift = std::vec::Vec::new();
+                for _ in 0..rows {
+                    let m = 1e-4 * (1 + next() % 20000) as f64;
+                    let (mq, sh) = crate::quant::quantize_multiplier(m).unwrap();
+                    mult.extend_from_slice(&mq.to_le_bytes());
+                    shift.push(sh as u8);
+                }
+                [w, bias, w_scale, mult, shift]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn packed_int8_path_is_bit_identical_to_the_reference() {
+        // Widths that exercise the 16-column blocks, single groups, columns beyond the last
+        // group, and row counts that are not multiples of four.
+        for (k, sizes) in [
+            &[36usize, 64, 32, 16, 4][..],
+            &[36, 144, 36],
+            &[39, 21, 7, 5],
+            &[3, 2, 1],
+            &[17, 33, 250],
+        ]
+        .iter()
+        .enumerate()
+        {
+            let bytes = int8_chain(sizes, 0x9E37_79B9 + k as u64);
+            let n = bytes.len();
+            let layers: std::vec::Vec<Layer<'_>> = bytes
+                .iter()
+                .zip(sizes.windows(2))
+                .enumerate()
+                .map(|(i, (b, p))| Layer {
+                    rows: p[1] as u16,
+                    cols: p[0] as u16,
+                    act: if i + 1 == n {
+                        Activation::Linear
+                    } else {
+                        Activation::Relu
+                    },
+                    weights: Weights::Int8 {
+                        w: &b[0],
+                        bias: LeI32(&b[1]),
+                        w_scale: LeF32(&b[2]),
+                        mult: LeI32(&b[3]),
+                        shift: &b[4],
+                        in_scale: 0.05,
+                        out_scale: 0.05,
+                    },
+                })
+                .collect();
+            let mut s = Scratch::default();
+            for t in 0..20 {
+                let input: std::vec::Vec<f32> = (0..sizes[0])
+                    .map(|i| ((i * 7 + t * 13) % 23) as f32 * 0.4 - 4.0)
+                    .collect();
+                let mut out = std::vec![0f32; sizes[n]];
+                run(&layers, &input, &mut out, &mut s).unwrap();
+                let want = run_reference(&layers, &input);
+                assert_eq!(
+                    out.iter()
+                        .map(|v| v.to_bits())
+                        .collect::<std::vec::Vec<_>>(),
+                    want.iter()
+                        .map(|v| v.to_bits())
+                        .collect::<std::vec::Vec<_>>(),
+                    "sizes {sizes:?}, input {t}"
+                );
+            }
+        }
     }
 }

@@ -5,7 +5,7 @@ use crate::cost::{self, Clock, Stat};
 use crate::io::{Line, Out, Stdin, LINE_MAX};
 use crate::text::{parse_record_bytes, write_result};
 use core::fmt::Write;
-use magic_core::invert::{forward_for, invert_at_for, model_decoder, model_encoder, Workspace};
+use magic_core::invert::{forward_for, invert_into, model_decoder, model_encoder, Workspace};
 use magic_core::line::{write_error, LineError};
 #[cfg(feature = "rtm")]
 use magic_core::model_file::AnyProblem;
@@ -14,7 +14,7 @@ use magic_core::model_file::MogiOnly;
 use magic_core::model_file::{Model, Variant, MAX_OBS, MAX_PARAMS};
 use magic_core::nn::{self, Layer, Weights};
 use magic_core::quant;
-use magic_core::Flags;
+use magic_core::{Flags, Inversion};
 
 /// The model file named by `MAGIC_MODEL` at build time (see `build.rs`).
 static MODEL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/model.magic"));
@@ -35,8 +35,12 @@ const SPLIT_REPEAT: u32 = 32;
 /// created in its own short-lived function, so that the stack holds only what one inversion needs.
 pub fn run() -> bool {
     let mut out = Out::new();
-    let (Some(cp), Some(ws), Some(stdin)) = (cortex_m::Peripherals::take(), workspace(), stdin())
-    else {
+    let (Some(cp), Some(ws), Some(stdin), Some(inv)) = (
+        cortex_m::Peripherals::take(),
+        workspace(),
+        stdin(),
+        inversion(),
+    ) else {
         let _ = out.write_str("error,start-up: state already taken");
         out.end_line();
         return false;
@@ -82,12 +86,12 @@ pub fn run() -> bool {
         parse.add(clock.since(t0));
         let result = parsed.and_then(|day| {
             let t = clock.now();
-            let r = invert_at_for::<f32, Linked>(model, &obs[..n_obs], day, ws);
+            let r = invert_into::<f32, Linked>(model, &obs[..n_obs], day, ws, inv);
             let dt = clock.since(t);
-            r.map(|inv| (inv, dt, day)).map_err(LineError::Invert)
+            r.map(|()| (dt, day)).map_err(LineError::Invert)
         });
         match result {
-            Ok((inv, dt, day)) => {
+            Ok((dt, day)) => {
                 if inv.flags.has(Flags::MISSING) {
                     missing.add(dt);
                 } else {
@@ -96,7 +100,7 @@ pub fn run() -> bool {
                     last_day = day;
                     have_valid = true;
                 }
-                let _ = write_result(&mut out, &inv);
+                let _ = write_result(&mut out, inv);
             }
             Err(e) => {
                 errors += 1;
@@ -164,6 +168,12 @@ pub fn run() -> bool {
 #[inline(never)]
 fn workspace() -> Option<&'static mut Workspace> {
     cortex_m::singleton!(: Workspace = Workspace::default())
+}
+
+/// The result of an inversion (written in place by `invert_into`), in a static.
+#[inline(never)]
+fn inversion() -> Option<&'static mut Inversion<f32>> {
+    cortex_m::singleton!(: Inversion<f32> = Inversion::empty())
 }
 
 /// The input reader and its line buffer, in a static.
@@ -253,8 +263,9 @@ fn measure_split(
     })
 }
 
-/// Checks the int8 dot-product kernel this build uses against the portable one on every row of
-/// every int8 layer of the model, with deterministic pseudo-random activations.
+/// Checks the int8 dot-product kernels this build uses (the row-blocked pair kernel and the
+/// single-row one) against the portable dot product on every row of every int8 layer of the
+/// model, with deterministic pseudo-random activations.
 fn self_check(model: &Model<'_>) -> Result<(), &'static str> {
     let mut seed = 0x2545_F491u32;
     for layer in model.encoder.iter().chain(model.decoder.iter()) {
@@ -270,21 +281,32 @@ fn check_layer(layer: &Layer<'_>, seed: &mut u32) -> Result<(), &'static str> {
     let (rows, cols) = (layer.rows as usize, layer.cols as usize);
     let mut x = [0i8; nn::MAX_WIDTH];
     let mut xp = [0u32; quant::packed_words(nn::MAX_WIDTH)];
-    for v in x[..cols].iter_mut() {
+    let x = x.get_mut(..cols).ok_or("layer wider than MAX_WIDTH")?;
+    for v in x.iter_mut() {
         *seed ^= *seed << 13;
         *seed ^= *seed >> 17;
         *seed ^= *seed << 5;
         *v = ((*seed >> 24) as u8 as i8).max(-127);
     }
-    quant::pack_i8_pairs(&x[..cols], &mut xp);
+    quant::pack_i8_pairs(x, &mut xp);
+    let xp = &xp[..quant::packed_words(cols)];
+    let differs = "the DSP int8 dot product differs from the portable one";
     for r in 0..rows {
         let row = w
             .get(r * cols..(r + 1) * cols)
             .ok_or("layer shorter than rows x cols")?;
-        let portable = quant::dot_i8(row, &x[..cols]);
-        let fast = quant::dot_i8_packed(row, &xp);
-        if portable != fast {
-            return Err("the DSP int8 dot product differs from the portable one");
+        let portable = quant::dot_i8(row, x);
+        if quant::dot_i8_packed(row, xp) != portable {
+            return Err(differs);
+        }
+        if r % 2 == 0 && r + 1 < rows {
+            let next = w
+                .get((r + 1) * cols..(r + 2) * cols)
+                .ok_or("layer shorter than rows x cols")?;
+            let pair = quant::dot2_i8_packed(&w[r * cols..], cols, xp);
+            if pair != [portable, quant::dot_i8(next, x)] {
+                return Err(differs);
+            }
         }
     }
     Ok(())
