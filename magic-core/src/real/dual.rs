@@ -1,6 +1,6 @@
 //! Forward-mode dual numbers: a value and `N` exact partial derivatives.
 
-use super::{e1_f64, Real};
+use super::{e1_f64, e1_with_exp, Lanes, Real};
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 /// A forward-mode dual number `v + Σ dᵢ εᵢ` with `N` independent infinitesimals.
@@ -135,9 +135,28 @@ assign_op!(MulAssign, mul_assign, *);
 assign_op!(DivAssign, div_assign, /);
 
 impl<const N: usize> Real for Dual<N> {
+    type Plain = f64;
+    type Lanes = Self;
     #[inline]
     fn c(v: f64) -> Self {
         Self::constant(v)
+    }
+    #[inline]
+    fn scale(mut self, k: f64) -> Self {
+        self.v *= k;
+        for a in self.d.iter_mut() {
+            *a *= k;
+        }
+        self
+    }
+    #[inline]
+    fn from_plain(k: f64) -> Self {
+        Self::constant(k)
+    }
+    #[inline]
+    fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
+        let (g, dg) = f(self.v);
+        self.chain(g, dg)
     }
     #[inline]
     fn value(self) -> f64 {
@@ -223,8 +242,31 @@ impl<const N: usize> Real for Dual<N> {
         self.chain(e1_f64(self.v), -libm::exp(-self.v) / self.v)
     }
     #[inline]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let ex = libm::exp(-self.v);
+        let e1 = e1_with_exp(self.v, ex);
+        (self.chain(e1, -ex / self.v), self.chain(ex, -ex))
+    }
+    #[inline]
     fn is_finite(self) -> bool {
         self.v.is_finite() && self.d.iter().all(|x| x.is_finite())
+    }
+}
+
+/// A dual is its own single lane: its derivative array is already computed element-wise.
+impl<const N: usize> Lanes<Dual<N>> for Dual<N> {
+    const WIDTH: usize = 1;
+    #[inline]
+    fn splat(v: Self) -> Self {
+        v
+    }
+    #[inline]
+    fn lane(self, _i: usize) -> Self {
+        self
+    }
+    #[inline]
+    fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> f64 {
+        f(0)
     }
 }
 

@@ -10,12 +10,18 @@
 //!
 //! Branches in the physics (numerical guards, series switches) look at [`Real::value`], the primal
 //! value, so all three scalars take the same branch for the same input.
+//!
+//! [`F64x4`] and [`F32x4`] ([`lanes`]) are `Real`s too: four independent values computed together,
+//! which is how INFORM evaluates four wavelengths per call. Code that may run on lanes branches
+//! through [`Real::select`], where each lane takes its own branch.
 
 mod dual;
 mod e1;
+pub mod lanes;
 
 pub use dual::Dual;
 pub use e1::{e1_f64, e1_with_exp, E1_MAX_REL_ERROR};
+pub use lanes::{F32x4, F64x4, Lanes};
 
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -35,8 +41,45 @@ pub trait Real:
     + MulAssign
     + DivAssign
 {
+    /// The same kind of number without derivatives, for constants that multiply it (table values,
+    /// precomputed factors): `f64` for `f64` and [`Dual`], `f32` for `f32`, the lanes themselves
+    /// for lanes.
+    type Plain: Real;
+    /// Several values of this type computed together: [`F64x4`] for `f64`, [`F32x4`] for `f32`;
+    /// a dual is its own single lane (its derivative array is already its parallelism).
+    type Lanes: Lanes<Self>;
+
     /// A constant (derivatives zero).
     fn c(v: f64) -> Self;
+    /// `self · k` for a plain factor `k`; for a dual this scales the derivatives, where
+    /// `self * Self::from_plain(k)` would apply the product rule to zero derivatives.
+    fn scale(self, k: Self::Plain) -> Self;
+    /// A plain value as a constant of this type.
+    fn from_plain(k: Self::Plain) -> Self;
+    /// `a()` where `pred(value)` holds, else `b()` — by the primal value for scalars and duals
+    /// (only the chosen branch is evaluated), lane by lane for lanes (a branch is evaluated when
+    /// some lane takes it). Physics that may run on lanes branches this way rather than on
+    /// [`Real::value`].
+    #[inline(always)]
+    fn select(
+        self,
+        pred: impl Fn(f64) -> bool,
+        a: impl FnOnce() -> Self,
+        b: impl FnOnce() -> Self,
+    ) -> Self {
+        if pred(self.value()) {
+            a()
+        } else {
+            b()
+        }
+    }
+    /// A scalar function given by its value and derivative, `f(x) = (g(x), g'(x))`, applied to
+    /// `self` (lane by lane for lanes; by the chain rule for duals), for functions evaluated in
+    /// f64 outside the scalar type (such as PROSPECT's plate transmissivity).
+    #[inline]
+    fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
+        Self::c(f(self.value()).0)
+    }
     /// The primal value as `f64` (for branching and reporting).
     fn value(self) -> f64;
     /// Square root.
@@ -67,6 +110,11 @@ pub trait Real:
     fn abs(self) -> Self;
     /// The exponential integral E1(x) = ∫₁^∞ e^(−xt)/t dt for x > 0 (derivative −e^(−x)/x).
     fn e1(self) -> Self;
+    /// `(E1(x), e^(−x))`: E1 needs e^(−x) for x > 1, so callers that use both get them together.
+    #[inline]
+    fn e1_and_exp(self) -> (Self, Self) {
+        (self.e1(), (-self).exp())
+    }
 
     /// Zero.
     #[inline]
@@ -106,9 +154,19 @@ pub trait Real:
 }
 
 impl Real for f64 {
+    type Plain = f64;
+    type Lanes = F64x4;
     #[inline]
     fn c(v: f64) -> Self {
         v
+    }
+    #[inline]
+    fn scale(self, k: f64) -> Self {
+        self * k
+    }
+    #[inline]
+    fn from_plain(k: f64) -> Self {
+        k
     }
     #[inline]
     fn value(self) -> f64 {
@@ -171,15 +229,30 @@ impl Real for f64 {
         e1_f64(self)
     }
     #[inline]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let ex = libm::exp(-self);
+        (e1_with_exp(self, ex), ex)
+    }
+    #[inline]
     fn is_finite(self) -> bool {
         f64::is_finite(self)
     }
 }
 
 impl Real for f32 {
+    type Plain = f32;
+    type Lanes = F32x4;
     #[inline]
     fn c(v: f64) -> Self {
         v as f32
+    }
+    #[inline]
+    fn scale(self, k: f32) -> Self {
+        self * k
+    }
+    #[inline]
+    fn from_plain(k: f32) -> Self {
+        k
     }
     #[inline]
     fn value(self) -> f64 {

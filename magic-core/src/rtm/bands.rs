@@ -20,12 +20,12 @@
 
 use super::inform::{Geometry, Scene, SpectralRow};
 use super::model::{
-    inputs_from_learned, Fixed, Inform, Tables, LANES, N_BANDS, N_INPUTS, N_LEARNED,
+    inputs_from_learned, Fixed, Inform, LearnedJacobian, Tables, N_BANDS, N_INPUTS, N_LEARNED,
 };
-use super::prospect::{leaf_optics, CoefRow, Coefficients, Leaf, LeafOptics};
+use super::prospect::{CoefRow, Coefficients};
 use super::sail::LITAB_DEG;
 use crate::quant::LeF32;
-use crate::real::{Dual, Real};
+use crate::real::{Lanes, Real};
 use crate::Error;
 
 /// Values per spectral row (9 PROSPECT-D coefficients, 2 soil spectra, 2 irradiances).
@@ -177,6 +177,16 @@ impl<V: Values> Packed<V> {
         }
     }
 
+    /// Rows `i0, i0 + 1, …` as lanes of `W`, row `i0 + j` in lane `j`; lanes past the last row
+    /// repeat it.
+    #[inline]
+    fn rows<S: Real, W: Lanes<S>>(&self, i0: usize) -> SpectralRow<W::Plain> {
+        let last = self.n_rows - 1;
+        SpectralRow::from_fn(|k| {
+            W::plain_from_fn(|j| self.spectral.at((i0 + j).min(last) * ROW_WIDTH + k))
+        })
+    }
+
     /// Weight of row `i` in band `b`.
     #[inline]
     pub fn weight(&self, i: usize, b: usize) -> f64 {
@@ -236,30 +246,18 @@ impl<V: Values> Packed<V> {
         self.check_out(out)?;
         let scene = self.scene(x, geometry)?;
         out.iter_mut().for_each(|o| *o = R::zero());
-        let acc = |i: usize, r: R, out: &mut [R]| {
-            for (b, o) in out.iter_mut().enumerate() {
-                let w = self.weight(i, b);
-                if w != 0.0 {
-                    *o += R::c(w) * r;
+        let lanes = scene.lanes();
+        let width = <R::Lanes as Lanes<R>>::WIDTH;
+        for i0 in (0..self.n_rows).step_by(width) {
+            let r = lanes.wavelength(&self.rows::<R, R::Lanes>(i0)).r_forest;
+            for (j, i) in (i0..self.n_rows.min(i0 + width)).enumerate() {
+                let rj = r.lane(j);
+                for (b, o) in out.iter_mut().enumerate() {
+                    let w = self.weight(i, b);
+                    if w != 0.0 {
+                        *o += rj.scale(<R::Plain as Real>::c(w));
+                    }
                 }
-            }
-        };
-        if core::mem::size_of::<R>() <= 8 {
-            // Plain floats: LANES rows at a time (see `Scene::wavelengths`); the last batch is
-            // padded with its last row and the padding ignored.
-            let mut i = 0;
-            while i < self.n_rows {
-                let ix: [usize; LANES] = core::array::from_fn(|j| (i + j).min(self.n_rows - 1));
-                let rows = ix.map(|k| self.row(k));
-                let t = scene.wavelengths(&rows);
-                for (j, tj) in t.iter().take(LANES.min(self.n_rows - i)).enumerate() {
-                    acc(i + j, tj.r_forest, out);
-                }
-                i += LANES;
-            }
-        } else {
-            for i in 0..self.n_rows {
-                acc(i, scene.wavelength(&self.row(i)).r_forest, out);
             }
         }
         Ok(())
@@ -288,7 +286,7 @@ impl<V: Values> Packed<V> {
     }
 
     /// Bands and exact Jacobian `∂band/∂z` (`jac[b]`, 7 per band) at the learned variables, by
-    /// the split chain rule of [`Inform::jacobian`] (leaf on `Dual<4>`, canopy on `Dual<5>`).
+    /// the split chain rule of [`Inform::jacobian`].
     pub fn jacobian(
         &self,
         z: &[f64; N_LEARNED],
@@ -299,52 +297,12 @@ impl<V: Values> Packed<V> {
     ) -> Result<(), Error> {
         self.check_out(out)?;
         self.check_out(jac)?;
-        if let Some(i) = z.iter().position(|v| !v.is_finite()) {
-            return Err(Error::NonFinite {
-                what: "learned variable",
-                index: i,
-            });
-        }
-        if z[6] <= 0.0 {
-            return Err(Error::OutOfRange {
-                what: "fc (must be > 0)",
-            });
-        }
-        // Canopy: LAI, LAIu, fc carry slots 2, 3, 4 (slots 0, 1 are leaf ρ, τ).
-        let z5: [Dual<5>; N_LEARNED] = core::array::from_fn(|i| {
-            if i >= 4 {
-                Dual::var(z[i], i - 2)
-            } else {
-                Dual::constant(z[i])
-            }
-        });
-        let scene = self.scene(&inputs_from_learned(&z5, fixed), geometry)?;
-        // Leaf: N, cab, cw, cm carry slots 0..4.
-        let leaf4 = Leaf {
-            n: Dual::<4>::var(z[0], 0),
-            cab: Dual::var(z[1], 1),
-            car: Dual::constant(fixed.car),
-            anth: Dual::constant(fixed.anth),
-            cbrown: Dual::constant(fixed.cbrown),
-            cw: Dual::var(z[2], 2),
-            cm: Dual::var(z[3], 3),
-        };
+        let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
         out.iter_mut().for_each(|o| *o = 0.0);
         jac.iter_mut().for_each(|r| *r = [0.0; N_LEARNED]);
         for i in 0..self.n_rows {
-            let row = self.row(i);
-            let lo = leaf_optics(&row.coef, &leaf4);
-            let seeded = LeafOptics {
-                refl: Dual::<5>::var(lo.refl.v, 0),
-                trans: Dual::<5>::var(lo.trans.v, 1),
-            };
-            let [t] = scene.wavelengths_with_leaf(&[row], &[seeded]);
-            let r = t.r_forest;
-            let mut d = [0.0; N_LEARNED];
-            for (k, dk) in d.iter_mut().take(4).enumerate() {
-                *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
-            }
-            d[4..].copy_from_slice(&r.d[2..]);
+            let r = lj.wavelength(&self.row(i));
+            let d = r.d;
             for b in 0..self.n_bands {
                 let w = self.weight(i, b);
                 if w != 0.0 {
@@ -362,6 +320,7 @@ impl<V: Values> Packed<V> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::real::Dual;
 
     /// Two wavelengths, two bands, uniform beta row: packed f64 and f32 bytes agree, the
     /// Jacobian agrees with Dual<7> forward mode.

@@ -49,13 +49,12 @@
 //! and the hotspot follows [`HotspotRule::Physical`]. Everything else (PROSPECT-D, 4SAIL, the
 //! direct/diffuse weighting, FLIM) is the same code in both modes.
 
-use super::prospect::{leaf_optics_lanes, CoefRow, Leaf, LeafOptics};
+use super::prospect::{leaf_optics, CoefRow, Leaf, LeafOptics};
 use super::sail::{
-    directional, extinction, layer, medium, mixed_reflectance, sail_view, skyl, slab, sqrt0,
-    tan_distance, Directional, Extinction, HotspotRule, Layer, Lidf, Medium, SailOutput, Slab,
-    SunView,
+    directional, extinction, irradiance_weights, layer, medium, sail_view, skyl, slab, sqrt0,
+    tan_distance, Extinction, HotspotRule, Layer, Lidf, SailOutput, SunView,
 };
-use crate::real::Real;
+use crate::real::{Lanes, Real};
 use core::f64::consts::PI;
 
 /// LAI of the optically thick crown layer (reference value).
@@ -93,6 +92,23 @@ pub struct CrownGeometry<R> {
     pub fos: R,
 }
 
+impl<R: Copy> CrownGeometry<R> {
+    /// The terms with `f` applied to each (to broadcast them to lanes).
+    pub fn map<S>(&self, f: impl Fn(R) -> S) -> CrownGeometry<S> {
+        CrownGeometry {
+            k: f(self.k),
+            co: f(self.co),
+            cs: f(self.cs),
+            g: f(self.g),
+            p: f(self.p),
+            fcd: f(self.fcd),
+            fcs: f(self.fcs),
+            fod: f(self.fod),
+            fos: f(self.fos),
+        }
+    }
+}
+
 /// FLIM crown geometry for crown diameter `cd` (m), stem density `sd` (ha⁻¹), height `h` (m) and
 /// sun zenith `tts`, view zenith `tto`, relative azimuth `psi` in radians.
 pub fn crown_geometry<R: Real>(cd: R, sd: R, h: R, tts: R, tto: R, psi: R) -> CrownGeometry<R> {
@@ -124,6 +140,20 @@ pub fn forest_reflectance<R: Real>(cg: &CrownGeometry<R>, r_u: R, r_inf: R, t_s:
     let g = cg.fcd * tst + cg.fcs * t_o + cg.fod * t_s + cg.fos;
     let c = cg.fcd * (R::one() - tst);
     r_inf * c + r_u * g
+}
+
+/// The forest reflectance per unit of each crown fraction: [`forest_reflectance`] is
+/// `fcd·B[0] + fcs·B[1] + fod·B[2] + fos·B[3]` with these `B` (so its derivative with respect to
+/// anything that moves only the fractions, such as the cover, is `Σ ∂F_i·B[i]`).
+#[inline]
+pub fn crown_fraction_terms<R: Real>(r_u: R, r_inf: R, t_s: R, t_o: R) -> [R; 4] {
+    let tst = t_s * t_o;
+    [
+        r_inf * (R::one() - tst) + r_u * tst,
+        r_u * t_o,
+        r_u * t_s,
+        r_u,
+    ]
 }
 
 /// Crown diameter (m) and tree height (m) from fractional cover `fc` and stem density `sd` (ha⁻¹),
@@ -162,19 +192,58 @@ pub struct Stand<R> {
     pub h: R,
 }
 
-/// One wavelength of the spectral tables INFORM needs besides PROSPECT.
+/// One wavelength of the spectral tables INFORM needs, in `f64` as read from the tables, or in
+/// another plain type (`f32`, or lanes holding one wavelength each).
 #[derive(Clone, Copy, Debug)]
-pub struct SpectralRow {
+pub struct SpectralRow<T = f64> {
     /// PROSPECT-D coefficients.
-    pub coef: CoefRow,
+    pub coef: CoefRow<T>,
     /// Dry soil reflectance.
-    pub soil_dry: f64,
+    pub soil_dry: T,
     /// Wet soil reflectance.
-    pub soil_wet: f64,
+    pub soil_wet: T,
     /// Direct solar irradiance.
-    pub es: f64,
+    pub es: T,
     /// Diffuse sky irradiance.
-    pub ed: f64,
+    pub ed: T,
+}
+
+impl<T: Copy> SpectralRow<T> {
+    /// The row with `f` applied to every value (to convert it to another plain type).
+    #[inline]
+    pub fn map<U>(&self, f: impl Fn(T) -> U) -> SpectralRow<U> {
+        SpectralRow {
+            coef: self.coef.map(&f),
+            soil_dry: f(self.soil_dry),
+            soil_wet: f(self.soil_wet),
+            es: f(self.es),
+            ed: f(self.ed),
+        }
+    }
+
+    /// The row whose value `k` is `f(k)`, `k` counting the 13 values in the order of
+    /// [`crate::rtm::bands::ROW_WIDTH`]: 9 PROSPECT-D coefficients, dry and wet soil, direct and
+    /// diffuse irradiance.
+    #[inline]
+    pub fn from_fn(mut f: impl FnMut(usize) -> T) -> Self {
+        SpectralRow {
+            coef: CoefRow {
+                nr: f(0),
+                k_cab: f(1),
+                k_car: f(2),
+                k_anth: f(3),
+                k_brown: f(4),
+                k_cw: f(5),
+                k_cm: f(6),
+                t12: f(7),
+                tav90n: f(8),
+            },
+            soil_dry: f(9),
+            soil_wet: f(10),
+            es: f(11),
+            ed: f(12),
+        }
+    }
 }
 
 /// Every intermediate INFORM result at one wavelength (for stepwise checks).
@@ -221,6 +290,9 @@ pub struct Scene<R> {
     pub crown: CrownGeometry<R>,
     /// The angles (radians) the crown geometry was computed with: sun zenith, view zenith, azimuth.
     pub inform_angles: [R; 3],
+    /// Weights of `rsot` and `rdot` in the reference's crown "transmittances" (unit irradiances,
+    /// diffuse fractions `skyl_s` and `skyl_o`).
+    crown_weights: [(R, R); 2],
 }
 
 impl<R: Real> Scene<R> {
@@ -251,6 +323,7 @@ impl<R: Real> Scene<R> {
                         stand.cd, stand.sd, stand.h, angles[0], angles[1], angles[2],
                     ),
                     inform_angles: angles,
+                    crown_weights: [skyl(sv.tts), skyl(sv_o.tts)].map(unit_irradiance_weights),
                 }
             }
             Geometry::Physical => {
@@ -274,87 +347,93 @@ impl<R: Real> Scene<R> {
                     skyl_o: s,
                     crown: crown_geometry(stand.cd, stand.sd, stand.h, sv.tts, sv.tto, sv.psi),
                     inform_angles: [sv.tts, sv.tto, sv.psi],
+                    crown_weights: [unit_irradiance_weights(s); 2],
                 }
             }
         }
     }
 
-    /// INFORM at one wavelength, with every intermediate result.
-    #[inline]
-    pub fn wavelength(&self, row: &SpectralRow) -> WavelengthTerms<R> {
-        let [t] = self.wavelengths(&[*row]);
-        t
+    /// The scene broadcast to lanes ([`Real::Lanes`]: four wavelengths per evaluation for
+    /// `f64` and `f32`; a dual scene is its own single lane).
+    pub fn lanes(&self) -> Scene<R::Lanes> {
+        let f = <R::Lanes as Lanes<R>>::splat;
+        Scene {
+            geometry: self.geometry,
+            leaf: self.leaf.map(f),
+            psoil: f(self.psoil),
+            ext: self.ext.map(f),
+            ext_o: self.ext_o.map(f),
+            understory: self.understory.map(f),
+            crown_inf: self.crown_inf.map(f),
+            crown_s: self.crown_s.map(f),
+            crown_o: self.crown_o.map(f),
+            skyl_s: f(self.skyl_s),
+            skyl_o: f(self.skyl_o),
+            crown: self.crown.map(f),
+            inform_angles: self.inform_angles.map(f),
+            crown_weights: self.crown_weights.map(|(a, b)| (f(a), f(b))),
+        }
     }
 
-    /// INFORM at `L` wavelengths at once (same results as `L` calls of [`Scene::wavelength`]).
-    ///
-    /// Every step runs for all lanes before the next, so the processor overlaps the `L`
-    /// independent dependency chains (see [`leaf_optics_lanes`]).
+    /// INFORM at one wavelength (the table row in the plain type of `R`), with every
+    /// intermediate result. On a scene of lanes ([`Scene::lanes`]) with a row of lanes, this is
+    /// INFORM at several wavelengths at once.
     #[inline]
-    pub fn wavelengths<const L: usize>(&self, rows: &[SpectralRow; L]) -> [WavelengthTerms<R>; L] {
-        let coefs: [CoefRow; L] = core::array::from_fn(|j| rows[j].coef);
-        let leaf: [LeafOptics<R>; L] = leaf_optics_lanes(&coefs, &self.leaf);
-        self.wavelengths_with_leaf(rows, &leaf)
+    pub fn wavelength(&self, row: &SpectralRow<R::Plain>) -> WavelengthTerms<R> {
+        self.wavelength_with_leaf(row, leaf_optics(&row.coef, &self.leaf))
     }
 
-    /// [`Scene::wavelengths`] with the leaf optics given instead of computed from the scene's
+    /// [`Scene::wavelength`] with the leaf optics given instead of computed from the scene's
     /// leaf parameters (used to split the Jacobian into a leaf part and a canopy part).
     #[inline]
-    pub fn wavelengths_with_leaf<const L: usize>(
+    pub fn wavelength_with_leaf(
         &self,
-        rows: &[SpectralRow; L],
-        leaf: &[LeafOptics<R>; L],
-    ) -> [WavelengthTerms<R>; L] {
-        use core::array::from_fn;
-        let one = R::one();
+        row: &SpectralRow<R::Plain>,
+        leaf: LeafOptics<R>,
+    ) -> WavelengthTerms<R> {
         // bf depends on the LIDF only, so one medium serves every 4SAIL call; the calls share
         // the sun/view terms (one or two geometries) and the diffuse terms of each LAI.
-        let md: [Medium<R>; L] = from_fn(|j| medium(self.ext.bf, leaf[j]));
-        let dir: [Directional<R>; L] = from_fn(|j| directional(&self.ext, &md[j]));
-        let slab_u: [Slab<R>; L] = from_fn(|j| slab(&md[j], self.understory.lai));
-        let slab_inf: [Slab<R>; L] = from_fn(|j| slab(&md[j], self.crown_inf.lai));
-        let slab_c: [Slab<R>; L] = from_fn(|j| slab(&md[j], self.crown_s.lai));
-        let r_u: [R; L] = from_fn(|j| {
-            let row = &rows[j];
-            let soil = self.psoil * R::c(row.soil_dry) + (one - self.psoil) * R::c(row.soil_wet);
-            let u = sail_view(&self.understory, &md[j], &dir[j], &slab_u[j], soil);
-            mixed_reflectance(u.rsot, u.rdot, self.skyl_s, row.es, row.ed)
-        });
-        let r_inf: [R; L] = from_fn(|j| {
-            let inf = sail_view(&self.crown_inf, &md[j], &dir[j], &slab_inf[j], r_u[j]);
-            mixed_reflectance(inf.rsot, inf.rdot, self.skyl_s, rows[j].es, rows[j].ed)
-        });
-        let t_so: [(R, R); L] = match self.geometry {
+        let md = medium(self.ext.bf, leaf);
+        let dir = directional(&self.ext, &md);
+        let slab_c = slab(&md, self.crown_s.lai);
+        let soil = self.psoil.scale(row.soil_dry) + (R::one() - self.psoil).scale(row.soil_wet);
+        let u = sail_view(
+            &self.understory,
+            &md,
+            &dir,
+            &slab(&md, self.understory.lai),
+            soil,
+        );
+        // Direct and diffuse reflectance weighted by the irradiance (mixed_reflectance).
+        let (w_dir, w_dif) = irradiance_weights(self.skyl_s, row.es, row.ed);
+        let r_u = u.rsot * w_dir + u.rdot * w_dif;
+        let slab_inf = slab(&md, self.crown_inf.lai);
+        let inf = sail_view(&self.crown_inf, &md, &dir, &slab_inf, r_u);
+        let r_inf = inf.rsot * w_dir + inf.rdot * w_dif;
+        let (t_s, t_o) = match self.geometry {
             Geometry::Reference => {
-                let dir_o: [Directional<R>; L] = from_fn(|j| directional(&self.ext_o, &md[j]));
-                let t_s: [R; L] = from_fn(|j| {
-                    let s = sail_view(&self.crown_s, &md[j], &dir[j], &slab_c[j], r_u[j]);
-                    mixed_reflectance(s.rsot, s.rdot, self.skyl_s, 1.0, 1.0)
-                });
-                from_fn(|j| {
-                    let o = sail_view(&self.crown_o, &md[j], &dir_o[j], &slab_c[j], r_u[j]);
-                    (
-                        t_s[j],
-                        mixed_reflectance(o.rsot, o.rdot, self.skyl_o, 1.0, 1.0),
-                    )
-                })
+                let s = sail_view(&self.crown_s, &md, &dir, &slab_c, r_u);
+                let dir_o = directional(&self.ext_o, &md);
+                let o = sail_view(&self.crown_o, &md, &dir_o, &slab_c, r_u);
+                let [(s_dir, s_dif), (o_dir, o_dif)] = self.crown_weights;
+                (
+                    s.rsot * s_dir + s.rdot * s_dif,
+                    o.rsot * o_dir + o.rdot * o_dif,
+                )
             }
-            Geometry::Physical => from_fn(|j| {
-                let c = sail_view(&self.crown_s, &md[j], &dir[j], &slab_c[j], r_u[j]);
-                crown_transmittances(&c, r_u[j], self.skyl_s)
-            }),
+            Geometry::Physical => {
+                let c = sail_view(&self.crown_s, &md, &dir, &slab_c, r_u);
+                crown_transmittances(&c, r_u, self.skyl_s)
+            }
         };
-        from_fn(|j| {
-            let (t_s, t_o) = t_so[j];
-            WavelengthTerms {
-                leaf: leaf[j],
-                r_understory: r_u[j],
-                r_crown_inf: r_inf[j],
-                t_s,
-                t_o,
-                r_forest: forest_reflectance(&self.crown, r_u[j], r_inf[j], t_s, t_o),
-            }
-        })
+        WavelengthTerms {
+            leaf,
+            r_understory: r_u,
+            r_crown_inf: r_inf,
+            t_s,
+            t_o,
+            r_forest: forest_reflectance(&self.crown, r_u, r_inf, t_s, t_o),
+        }
     }
 }
 
@@ -363,11 +442,17 @@ impl<R: Real> Scene<R> {
 #[inline]
 pub fn crown_transmittances<R: Real>(c: &SailOutput<R>, r_b: R, skyl: R) -> (R, R) {
     let one = R::one();
-    let dn = one - r_b * c.rdd;
-    let diffuse = skyl * c.tdd / dn;
-    let t_s = (one - skyl) * (c.tss + (c.tsd + c.tss * r_b * c.rdd) / dn) + diffuse;
-    let t_o = (one - skyl) * (c.too + (c.tdo + c.too * r_b * c.rdd) / dn) + diffuse;
+    let inv_dn = one / (one - r_b * c.rdd);
+    let diffuse = skyl * c.tdd * inv_dn;
+    let t_s = (one - skyl) * (c.tss + (c.tsd + c.tss * r_b * c.rdd) * inv_dn) + diffuse;
+    let t_o = (one - skyl) * (c.too + (c.tdo + c.too * r_b * c.rdd) * inv_dn) + diffuse;
     (t_s, t_o)
+}
+
+/// [`irradiance_weights`] for unit direct and diffuse irradiance.
+fn unit_irradiance_weights<R: Real>(skyl: R) -> (R, R) {
+    let one = <R::Plain as Real>::one();
+    irradiance_weights(skyl, one, one)
 }
 
 /// Relative azimuth folded into [0°, 180°] (4SAIL's `volscatt` assumes that range).

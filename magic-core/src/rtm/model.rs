@@ -3,19 +3,19 @@
 //! [`Tables`] borrows every spectral table (the crate ships none); [`Inform::new`] checks their
 //! sizes once and finds the wavelengths the bands need; [`Inform::forward`] validates the inputs,
 //! computes the wavelength-independent terms once ([`Scene`]) and evaluates PROSPECT-D, four 4SAIL
-//! calls and FLIM only at those wavelengths. Everything is generic over [`Real`]: `f64`, `f32`,
-//! and [`Dual`] for the exact Jacobian ([`Inform::jacobian`]).
+//! calls and FLIM only at those wavelengths, four wavelengths per evaluation for `f64` and `f32`
+//! (SIMD lanes, [`Real::Lanes`]). Everything is generic over [`Real`]: `f64`, `f32`, and [`Dual`]
+//! for the exact Jacobian ([`Inform::jacobian`]).
 
-use super::inform::{crown_from_cover, Geometry, Scene, SpectralRow, Stand, WavelengthTerms};
+use super::inform::{
+    crown_fraction_terms, crown_from_cover, crown_geometry, Geometry, Scene, SpectralRow, Stand,
+    WavelengthTerms,
+};
 use super::prospect::{leaf_optics, Coefficients, Leaf, LeafOptics};
 use super::sail::{CampbellBins, Lidf, LITAB_DEG};
 use super::sensor::Resampling;
-use crate::real::{Dual, Real};
+use crate::real::{Dual, Lanes, Real};
 use crate::Error;
-
-/// Wavelengths evaluated together in [`Inform::forward`] for `f32` / `f64` (see
-/// [`Scene::wavelengths`]); dual numbers go one wavelength at a time.
-pub const LANES: usize = 4;
 
 /// Number of model inputs.
 pub const N_INPUTS: usize = 21;
@@ -229,6 +229,19 @@ impl<'a> Inform<'a> {
         })
     }
 
+    /// The spectral rows of wavelength indices `ix` as lanes, row `ix[j]` in lane `j` (an index
+    /// past the end reads 0; [`Inform::new`] checked that the columns cover the matrix).
+    #[inline]
+    fn rows<S: Real, W: Lanes<S>>(&self, ix: &[usize]) -> SpectralRow<W::Plain> {
+        let t = &self.tables;
+        let p = &t.prospect;
+        let cols = [
+            p.nr, p.k_cab, p.k_car, p.k_anth, p.k_brown, p.k_cw, p.k_cm, p.t12, p.tav90n,
+            t.soil_dry, t.soil_wet, t.es, t.ed,
+        ];
+        SpectralRow::from_fn(|k| W::plain_from_fn(|j| cols[k].get(ix[j]).copied().unwrap_or(0.0)))
+    }
+
     /// Validates the 21 inputs and computes the wavelength-independent terms.
     pub fn scene<R: Real>(&self, x: &[R; N_INPUTS], geometry: Geometry) -> Result<Scene<R>, Error> {
         for (i, v) in x.iter().enumerate() {
@@ -341,28 +354,12 @@ impl<'a> Inform<'a> {
         x: &[R; N_INPUTS],
         geometry: Geometry,
     ) -> Result<[R; N_BANDS], Error> {
-        let scene = self.scene(x, geometry)?;
+        let scene = self.scene(x, geometry)?.lanes();
         let mut out = [R::zero(); N_BANDS];
-        // `new` checked that every column has a row for each wavelength of the matrix.
-        let fallback = self.row(0).ok_or(Error::OutOfRange {
-            what: "wavelength index",
-        })?;
-        if core::mem::size_of::<R>() <= 8 {
-            // Plain floats: evaluate LANES wavelengths together (overlapping dependency chains).
-            self.sensor.integrate_lanes(
-                |ix: &[usize; LANES]| {
-                    let rows = ix.map(|i| self.row(i).unwrap_or(fallback));
-                    scene.wavelengths(&rows).map(|t| t.r_forest)
-                },
-                &mut out,
-            )?;
-        } else {
-            // Dual numbers carry their own parallelism; batches of them only add copying.
-            self.sensor.integrate(
-                |i| scene.wavelength(&self.row(i).unwrap_or(fallback)).r_forest,
-                &mut out,
-            )?;
-        }
+        self.sensor.integrate_lanes(
+            |ix| scene.wavelength(&self.rows::<R, R::Lanes>(ix)).r_forest,
+            &mut out,
+        )?;
         Ok(out)
     }
 
@@ -377,7 +374,7 @@ impl<'a> Inform<'a> {
         let row = self.row(i).ok_or(Error::OutOfRange {
             what: "wavelength index",
         })?;
-        Ok(scene.wavelength(&row))
+        Ok(scene.wavelength(&row.map(<R::Plain as Real>::c)))
     }
 
     /// The forest reflectance at every wavelength of the grid (`out.len()` = number of
@@ -401,7 +398,7 @@ impl<'a> Inform<'a> {
             let row = self.row(i).ok_or(Error::OutOfRange {
                 what: "wavelength index",
             })?;
-            *o = scene.wavelength(&row).r_forest;
+            *o = scene.wavelength(&row.map(<R::Plain as Real>::c)).r_forest;
         }
         Ok(())
     }
@@ -428,19 +425,61 @@ impl<'a> Inform<'a> {
     }
 
     /// Bands and exact Jacobian `∂band/∂z` (13 × 7) at the learned variables
-    /// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, by forward-mode differentiation.
-    ///
-    /// The chain rule is split to carry fewer derivatives: per wavelength, PROSPECT-D runs on
-    /// [`Dual<4>`] (N, cab, cw, cm → leaf reflectance ρ and transmittance τ), the canopy on
-    /// [`Dual<5>`] (ρ, τ, LAI, LAIu, fc → forest reflectance), and
-    /// `∂R/∂leaf = ∂R/∂ρ·∂ρ/∂leaf + ∂R/∂τ·∂τ/∂leaf`. The result equals
-    /// [`Inform::forward_learned`] on [`Dual<7>`] up to round-off and costs about 25 % less.
+    /// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, by forward-mode differentiation with a split chain
+    /// rule ([`LearnedJacobian`]). The result equals [`Inform::forward_learned`] on [`Dual<7>`]
+    /// up to round-off.
     pub fn jacobian(
         &self,
         z: &[f64; N_LEARNED],
         fixed: &Fixed,
         geometry: Geometry,
     ) -> Result<([f64; N_BANDS], [[f64; N_LEARNED]; N_BANDS]), Error> {
+        let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
+        let fallback = self.row(0).ok_or(Error::OutOfRange {
+            what: "wavelength index",
+        })?;
+        let mut out = [Dual::<N_LEARNED>::constant(0.0); N_BANDS];
+        self.sensor.integrate(
+            |i| lj.wavelength(&self.row(i).unwrap_or(fallback)),
+            &mut out,
+        )?;
+        let mut y = [0.0; N_BANDS];
+        let mut jac = [[0.0; N_LEARNED]; N_BANDS];
+        for (b, o) in out.iter().enumerate() {
+            y[b] = o.v;
+            jac[b] = o.d;
+        }
+        Ok((y, jac))
+    }
+}
+
+/// The exact derivatives of the forest reflectance with respect to the learned variables
+/// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, one wavelength at a time, with the chain rule split so
+/// that each part carries few derivatives:
+///
+/// * PROSPECT-D on [`Dual<4>`] in (N, cab, cw, cm) gives the leaf reflectance ρ and
+///   transmittance τ with their derivatives;
+/// * the canopy on [`Dual<4>`] in (ρ, τ, LAI, LAIu), with ρ and τ seeded per wavelength, gives
+///   `∂R/∂ρ`, `∂R/∂τ`, `∂R/∂LAI`, `∂R/∂LAIu`; then `∂R/∂leaf = ∂R/∂ρ·∂ρ/∂leaf + ∂R/∂τ·∂τ/∂leaf`;
+/// * the cover fc moves only the four crown fractions F (through crown diameter and height), and
+///   R is linear in them ([`crown_fraction_terms`]): `∂R/∂fc = Σ ∂F_i/∂fc·B_i`, with `∂F/∂fc`
+///   computed once per spectrum.
+pub(crate) struct LearnedJacobian {
+    /// The canopy scene: LAI and LAIu in derivative slots 2 and 3 (0 and 1 are ρ and τ).
+    canopy: Scene<Dual<4>>,
+    /// The leaf with N, cab, cw, cm in slots 0 to 3.
+    leaf: Leaf<Dual<4>>,
+    /// `∂F/∂fc` of the crown fractions `[fcd, fcs, fod, fos]`.
+    dfractions_dfc: [f64; 4],
+}
+
+impl LearnedJacobian {
+    /// The per-spectrum part at `z`, with the scene built (and the inputs validated) by `scene`.
+    pub(crate) fn new(
+        z: &[f64; N_LEARNED],
+        fixed: &Fixed,
+        scene: impl FnOnce(&[Dual<4>; N_INPUTS]) -> Result<Scene<Dual<4>>, Error>,
+    ) -> Result<Self, Error> {
         if let Some(i) = z.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 what: "learned variable",
@@ -452,18 +491,19 @@ impl<'a> Inform<'a> {
                 what: "fc (must be > 0)",
             });
         }
-        // Canopy scene: LAI, LAIu, fc carry derivative slots 2, 3, 4 (slots 0, 1 are ρ, τ).
-        let z5: [Dual<5>; N_LEARNED] = core::array::from_fn(|i| {
-            if i >= 4 {
-                Dual::var(z[i], i - 2)
-            } else {
-                Dual::constant(z[i])
-            }
+        let z4: [Dual<4>; N_LEARNED] = core::array::from_fn(|i| match i {
+            4 => Dual::var(z[4], 2),
+            5 => Dual::var(z[5], 3),
+            _ => Dual::constant(z[i]),
         });
-        let scene = self.scene(&inputs_from_learned(&z5, fixed), geometry)?;
-        // Leaf: N, cab, cw, cm carry slots 0..4.
-        let leaf4 = Leaf {
-            n: Dual::<4>::var(z[0], 0),
+        let canopy = scene(&inputs_from_learned(&z4, fixed))?;
+        // The crown fractions as functions of fc, at the angles the scene's crown geometry used.
+        let sd = Dual::<1>::constant(fixed.sd);
+        let (cd, h) = crown_from_cover(Dual::var(z[6], 0), sd);
+        let [tts, tto, psi] = canopy.inform_angles.map(|a| Dual::constant(a.v));
+        let cg = crown_geometry(cd, sd, h, tts, tto, psi);
+        let leaf = Leaf {
+            n: Dual::var(z[0], 0),
             cab: Dual::var(z[1], 1),
             car: Dual::constant(fixed.car),
             anth: Dual::constant(fixed.anth),
@@ -471,36 +511,32 @@ impl<'a> Inform<'a> {
             cw: Dual::var(z[2], 2),
             cm: Dual::var(z[3], 3),
         };
-        let fallback = self.row(0).ok_or(Error::OutOfRange {
-            what: "wavelength index",
-        })?;
-        let mut out = [Dual::<N_LEARNED>::constant(0.0); N_BANDS];
-        self.sensor.integrate(
-            |i| {
-                let row = self.row(i).unwrap_or(fallback);
-                let lo = leaf_optics(&row.coef, &leaf4);
-                let seeded = LeafOptics {
-                    refl: Dual::<5>::var(lo.refl.v, 0),
-                    trans: Dual::<5>::var(lo.trans.v, 1),
-                };
-                let [t] = scene.wavelengths_with_leaf(&[row], &[seeded]);
-                let r = t.r_forest;
-                let mut d = [0.0; N_LEARNED];
-                for (k, dk) in d.iter_mut().take(4).enumerate() {
-                    *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
-                }
-                d[4..].copy_from_slice(&r.d[2..]);
-                Dual { v: r.v, d }
-            },
-            &mut out,
-        )?;
-        let mut y = [0.0; N_BANDS];
-        let mut jac = [[0.0; N_LEARNED]; N_BANDS];
-        for (b, o) in out.iter().enumerate() {
-            y[b] = o.v;
-            jac[b] = o.d;
+        Ok(LearnedJacobian {
+            canopy,
+            leaf,
+            dfractions_dfc: [cg.fcd.d[0], cg.fcs.d[0], cg.fod.d[0], cg.fos.d[0]],
+        })
+    }
+
+    /// The forest reflectance at one wavelength with its derivatives with respect to `z`.
+    #[inline]
+    pub(crate) fn wavelength(&self, row: &SpectralRow) -> Dual<N_LEARNED> {
+        let lo = leaf_optics(&row.coef, &self.leaf);
+        let seeded = LeafOptics {
+            refl: Dual::var(lo.refl.v, 0),
+            trans: Dual::var(lo.trans.v, 1),
+        };
+        let t = self.canopy.wavelength_with_leaf(row, seeded);
+        let r = t.r_forest;
+        let mut d = [0.0; N_LEARNED];
+        for (k, dk) in d.iter_mut().take(4).enumerate() {
+            *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
         }
-        Ok((y, jac))
+        d[4] = r.d[2];
+        d[5] = r.d[3];
+        let basis = crown_fraction_terms(t.r_understory.v, t.r_crown_inf.v, t.t_s.v, t.t_o.v);
+        d[6] = (0..4).map(|i| self.dfractions_dfc[i] * basis[i]).sum();
+        Dual { v: r.v, d }
     }
 }
 
@@ -640,10 +676,14 @@ mod tests {
             assert!(spec.iter().all(|&r| r > 0.0 && r < 1.0), "{spec:?}");
             // Lanes and single wavelengths give identical results.
             let scene = model.scene(&inputs(), geometry).unwrap();
-            let rows = [0, 1, 2, 3].map(|i| model.row(i).unwrap());
-            let lanes = scene.wavelengths(&rows);
-            for (j, r) in rows.iter().enumerate() {
-                assert_eq!(lanes[j].r_forest, scene.wavelength(r).r_forest);
+            let ix = [0, 1, 2, 5];
+            let lanes = scene
+                .lanes()
+                .wavelength(&model.rows::<f64, crate::real::F64x4>(&ix));
+            for (j, &i) in ix.iter().enumerate() {
+                let one = scene.wavelength(&model.row(i).unwrap());
+                assert_eq!(lanes.r_forest.0[j].to_bits(), one.r_forest.to_bits());
+                assert_eq!(lanes.leaf.trans.0[j].to_bits(), one.leaf.trans.to_bits());
             }
             // f32 and dual values agree with f64.
             let y32 = model

@@ -21,27 +21,46 @@
 
 use crate::real::Real;
 
-/// One row of the PROSPECT-D coefficient table (one wavelength).
+/// One row of the PROSPECT-D coefficient table (one wavelength), in `f64` as read from the
+/// table, or in another plain type (`f32`, or lanes holding one wavelength each).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CoefRow {
+pub struct CoefRow<T = f64> {
     /// Refractive index of the leaf material.
-    pub nr: f64,
+    pub nr: T,
     /// Specific absorption of chlorophyll a+b (cm² µg⁻¹).
-    pub k_cab: f64,
+    pub k_cab: T,
     /// Specific absorption of carotenoids (cm² µg⁻¹).
-    pub k_car: f64,
+    pub k_car: T,
     /// Specific absorption of anthocyanins (cm² µg⁻¹).
-    pub k_anth: f64,
+    pub k_anth: T,
     /// Specific absorption of brown pigments (arbitrary units).
-    pub k_brown: f64,
+    pub k_brown: T,
     /// Specific absorption of water (cm⁻¹).
-    pub k_cw: f64,
+    pub k_cw: T,
     /// Specific absorption of dry matter (cm² g⁻¹).
-    pub k_cm: f64,
+    pub k_cm: T,
     /// `tav(40°, nr)`: transmissivity of the upper leaf surface.
-    pub t12: f64,
+    pub t12: T,
     /// `tav(90°, nr)`: transmissivity of a surface for isotropic light.
-    pub tav90n: f64,
+    pub tav90n: T,
+}
+
+impl<T: Copy> CoefRow<T> {
+    /// The row with `f` applied to every value (to convert it to another plain type).
+    #[inline]
+    pub fn map<U>(&self, f: impl Fn(T) -> U) -> CoefRow<U> {
+        CoefRow {
+            nr: f(self.nr),
+            k_cab: f(self.k_cab),
+            k_car: f(self.k_car),
+            k_anth: f(self.k_anth),
+            k_brown: f(self.k_brown),
+            k_cw: f(self.k_cw),
+            k_cm: f(self.k_cm),
+            t12: f(self.t12),
+            tav90n: f(self.tav90n),
+        }
+    }
 }
 
 /// The PROSPECT-D coefficient table as borrowed columns (one value per wavelength, all the same
@@ -130,6 +149,21 @@ pub struct Leaf<R> {
     pub cm: R,
 }
 
+impl<R: Copy> Leaf<R> {
+    /// The parameters with `f` applied to each (to broadcast them to lanes).
+    pub fn map<S>(&self, f: impl Fn(R) -> S) -> Leaf<S> {
+        Leaf {
+            n: f(self.n),
+            cab: f(self.cab),
+            car: f(self.car),
+            anth: f(self.anth),
+            cbrown: f(self.cbrown),
+            cw: f(self.cw),
+            cm: f(self.cm),
+        }
+    }
+}
+
 /// Leaf hemispherical reflectance and transmittance at one wavelength.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LeafOptics<R> {
@@ -142,7 +176,11 @@ pub struct LeafOptics<R> {
 /// Floor of `va·(β − r90)` in the `vb` term (reference implementation).
 const VB_FLOOR: f64 = 1e-14;
 
-/// PROSPECT-D reflectance and transmittance of a leaf at the wavelength of `c`.
+/// PROSPECT-D reflectance and transmittance of a leaf at the wavelength of `c` (the table row
+/// in the plain type of `R`: `f64` for `f64` and duals, lanes of rows for lanes).
+///
+/// Written as scalar code; on lanes ([`crate::real::F64x4`]) it evaluates four wavelengths at
+/// once, each lane taking its own branch of the guards (see [`Real::select`]).
 ///
 /// ```
 /// use magic_core::rtm::prospect::{leaf_optics, CoefRow, Leaf};
@@ -153,109 +191,102 @@ const VB_FLOOR: f64 = 1e-14;
 /// assert!(o.refl > 0.0 && o.trans > 0.0 && o.refl + o.trans < 1.0);
 /// ```
 #[inline]
-pub fn leaf_optics<R: Real>(c: &CoefRow, leaf: &Leaf<R>) -> LeafOptics<R> {
-    let [o] = leaf_optics_lanes(&[*c], leaf);
-    o
+pub fn leaf_optics<R: Real>(c: &CoefRow<R::Plain>, leaf: &Leaf<R>) -> LeafOptics<R> {
+    let one = R::one();
+    let tau = plate_interior(c, leaf);
+    let plate = elementary_layer(c, tau);
+    let (va, va_inv, vb2) = stokes_terms(plate.r90, plate.t90);
+    // The N − 1 further layers: vbnn = vb^(N−1), with ln vb = ln(vb²)/2. Stokes' solution
+    // d = vbnn − 1/vbnn, s3 = va·vbnn − vbnn/va... is multiplied through by vbnn, with W = vbnn²:
+    // d·vbnn = W − 1, s3·vbnn = va·W − 1/va − r90·(W − 1) (one division instead of two).
+    let vbnn = ((leaf.n - one) * R::c(0.5) * vb2.ln()).exp();
+    let w = vbnn * vbnn;
+    let inv = one / (va * w - va_inv - plate.r90 * (w - one));
+    LeafOptics {
+        refl: plate.ra + plate.ta * plate.t90 * (w - one) * inv,
+        trans: plate.ta * (va - va_inv) * vbnn * inv,
+    }
 }
 
-/// [`leaf_optics`] at `L` wavelengths at once.
-///
-/// Each step is done for all lanes before the next, so the `L` independent dependency chains
-/// (divisions, square roots, exp/log) overlap in the processor instead of running one after the
-/// other; with `L = 4` this is about 1.7× faster per wavelength than [`leaf_optics`] in f64.
-/// Results are identical to `L` calls of [`leaf_optics`].
+/// The transmissivity `τ` of one plate's interior: the plate absorption `k` from the contents
+/// and specific absorptions, then `τ(k) = (1 − k)·e^(−k) + k²·E1(k)` (as
+/// [`plate_transmissivity`]).
 #[inline]
-pub fn leaf_optics_lanes<R: Real, const L: usize>(
-    rows: &[CoefRow; L],
-    leaf: &Leaf<R>,
-) -> [LeafOptics<R>; L] {
-    use core::array::from_fn;
+fn plate_interior<R: Real>(c: &CoefRow<R::Plain>, leaf: &Leaf<R>) -> R {
+    let k = (leaf.cab.scale(c.k_cab)
+        + leaf.car.scale(c.k_car)
+        + leaf.anth.scale(c.k_anth)
+        + leaf.cbrown.scale(c.k_brown)
+        + leaf.cw.scale(c.k_cw)
+        + leaf.cm.scale(c.k_cm))
+        * (R::one() / leaf.n);
+    // Reference guard: E1(0) is infinite; the reference substitutes the f64 epsilon.
+    let k = k.select(|v| v == 0.0, || R::c(f64::EPSILON), || k);
+    let (e1, ek) = k.e1_and_exp();
+    (R::one() - k) * ek + k * k * e1
+}
+
+/// The elementary layer (N = 1): reflectance and transmittance for the incident light and for
+/// isotropic light at both faces.
+struct Plate<R> {
+    ra: R,
+    ta: R,
+    r90: R,
+    t90: R,
+}
+
+/// The elementary layer from the rough upper surface (`t12`), the interior `tau` and the lower
+/// surface for isotropic light (`tav90n`). The isotropic case replaces `t12` by `tav90n` at the
+/// upper surface: `r90 = (ra − (1 − t12))·tav90n/t12 + 1 − tav90n`, `t90 = ta·tav90n/t12`, with
+/// `ra − (1 − t12)` the light scattered back out of the interior (computed directly, so no
+/// cancellation).
+#[inline]
+fn elementary_layer<R: Real>(c: &CoefRow<R::Plain>, tau: R) -> Plate<R> {
+    let one = <R::Plain as Real>::one();
+    let t21 = c.tav90n / (c.nr * c.nr);
+    let r21 = one - t21;
+    let inv_den = R::one() / (R::one() - (tau * tau).scale(r21 * r21));
+    let ta = tau.scale(c.t12 * t21) * inv_den;
+    let scattered = ta.scale(r21) * tau;
+    let inv_x = c.tav90n / c.t12;
+    Plate {
+        ra: R::from_plain(one - c.t12) + scattered,
+        ta,
+        r90: scattered.scale(inv_x) + R::from_plain(one - c.tav90n),
+        t90: ta.scale(inv_x),
+    }
+}
+
+/// Stokes' terms `(va, 1/va, vb²)` of a layer with diffuse reflectance `r` and transmittance
+/// `t`, in a cancellation-free form (the textbook form loses up to 4 digits in β − r when the
+/// plate is nearly opaque, too many for f32):
+///
+/// ```text
+/// A = 1 + r² − t²,  B = 1 − r² + t²,  δ = sqrt(A² − 4r²) = sqrt((1 − (r+t)²)(1 − (r−t)²)),
+/// va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = (1 − r² − t² + δ)/(2r),
+/// va·(β − r) = 2t²/(B + δ),  vb² = β·(va − r) / (va·(β − r)) = (1 − r² − t² + δ)·(B + δ) / ((A + δ)·2t²).
+/// ```
+///
+/// The reference floors `va·(β − r)` at 1e-14, i.e. `2t²` at `1e-14·(B + δ)`. The three terms
+/// share one division.
+#[inline]
+fn stokes_terms<R: Real>(r: R, t: R) -> (R, R, R) {
     let one = R::one();
-    let inv_n = one / leaf.n;
-    let k: [R; L] = from_fn(|j| {
-        let c = &rows[j];
-        let k = (leaf.cab * R::c(c.k_cab)
-            + leaf.car * R::c(c.k_car)
-            + leaf.anth * R::c(c.k_anth)
-            + leaf.cbrown * R::c(c.k_brown)
-            + leaf.cw * R::c(c.k_cw)
-            + leaf.cm * R::c(c.k_cm))
-            * inv_n;
-        if k.value() == 0.0 {
-            // Reference guard: E1(0) is infinite; the reference substitutes the f64 epsilon.
-            R::c(f64::EPSILON)
-        } else {
-            k
-        }
-    });
-    // τ and dτ/dk in f64, lifted to R (exact first derivative for duals, the value for floats).
-    let tau: [R; L] = from_fn(|j| {
-        let kv = k[j].value();
-        let (t, dt) = plate_transmissivity(kv);
-        R::c(t) + (k[j] - R::c(kv)) * R::c(dt)
-    });
-
-    // Interfaces (precomputed transmissivities) and the elementary layer (N = 1).
-    let ra_ta: [(R, R); L] = from_fn(|j| {
-        let c = &rows[j];
-        let t21 = c.tav90n / (c.nr * c.nr);
-        let r21 = 1.0 - t21;
-        let tau2 = tau[j] * tau[j];
-        let inv_den = one / (one - R::c(r21 * r21) * tau2);
-        let ta = R::c(c.t12 * t21) * tau[j] * inv_den;
-        (R::c(1.0 - c.t12) + ta * R::c(r21) * tau[j], ta)
-    });
-    let rt90: [(R, R); L] = from_fn(|j| {
-        let c = &rows[j];
-        let x = c.t12 / c.tav90n;
-        let y = x * (c.tav90n - 1.0) + 1.0 - c.t12;
-        let inv_x = R::c(c.tav90n / c.t12);
-        ((ra_ta[j].0 - R::c(y)) * inv_x, ra_ta[j].1 * inv_x)
-    });
-
-    // Stokes' equations for the remaining N − 1 layers, in a cancellation-free form (the textbook
-    // form loses up to 4 digits in β − r90 when the plate is nearly opaque, too many for f32):
-    //   A = 1 + r² − t²,  B = 1 − r² + t²,  δ = sqrt(A² − 4r²) = sqrt((1 − (r+t)²)(1 − (r−t)²)),
-    //   va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = (1 − r² − t² + δ)/(2r),
-    //   va·(β − r) = 2t²/(B + δ),  vb² = β·(va − r) / (va·(β − r)).
-    let delta: [R; L] = from_fn(|j| {
-        let (r, t) = rt90[j];
-        ((one - (r + t) * (r + t)) * (one - (r - t) * (r - t))).sqrt()
-    });
-    let va_beta: [(R, R); L] = from_fn(|j| {
-        let (r, t) = rt90[j];
-        let a_plus = one + r * r - t * t + delta[j];
-        let two_r = R::c(2.0) * r;
-        (a_plus / two_r, two_r / a_plus)
-    });
-    let vb: [R; L] = from_fn(|j| {
-        let (r, t) = rt90[j];
-        let (r2, t2) = (r * r, t * t);
-        let va_minus_r = (one - r2 - t2 + delta[j]) / (R::c(2.0) * r);
-        let b_plus = one - r2 + t2 + delta[j];
-        let two_t2 = R::c(2.0) * t2;
-        let beta = va_beta[j].1;
-        // Reference guard: va·(β − r) is floored at 1e-14.
-        if two_t2.value() <= VB_FLOOR * b_plus.value() {
-            (beta * va_minus_r / R::c(VB_FLOOR)).sqrt()
-        } else {
-            (beta * va_minus_r * b_plus / two_t2).sqrt()
-        }
-    });
-    let n1 = leaf.n - one;
-    let vbnn: [R; L] = from_fn(|j| (n1 * vb[j].ln()).exp());
-    from_fn(|j| {
-        let (ra, ta) = ra_ta[j];
-        let (r90, t90) = rt90[j];
-        let (va, va_inv) = va_beta[j];
-        let vbnn_inv = one / vbnn[j];
-        let d = vbnn[j] - vbnn_inv;
-        let inv_s3 = one / (va * vbnn[j] - va_inv * vbnn_inv - r90 * d);
-        LeafOptics {
-            refl: ra + ta * t90 * d * inv_s3,
-            trans: ta * (va - va_inv) * inv_s3,
-        }
-    })
+    let two = R::c(2.0);
+    let delta = ((one - (r + t) * (r + t)) * (one - (r - t) * (r - t))).sqrt();
+    let (r2, t2) = (r * r, t * t);
+    let a_plus = one + r2 - t2 + delta;
+    let b_plus = one - r2 + t2 + delta;
+    let c = one - r2 - t2 + delta;
+    let two_r = two * r;
+    let g = (two * t2).max(b_plus * R::c(VB_FLOOR));
+    let e = one / (a_plus * two_r * g);
+    let ge = g * e;
+    (
+        a_plus * a_plus * ge,
+        two_r * two_r * ge,
+        c * b_plus * two_r * e,
+    )
 }
 
 /// The transmissivity of a plate's interior `τ(k) = (1 − k)·e^(−k) + k²·E1(k)` and its derivative
@@ -457,7 +488,7 @@ mod tests {
             cw: 0.01,
             cm: 0.01,
         };
-        let o32 = leaf_optics(&c, &l32);
+        let o32 = leaf_optics(&c.map(|v| v as f32), &l32);
         assert!((o32.refl as f64 - o64.refl).abs() < 1e-5);
         assert!((o32.trans as f64 - o64.trans).abs() < 1e-5);
     }

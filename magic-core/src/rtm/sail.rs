@@ -21,6 +21,12 @@
 //! INFORM runs four 4SAIL calls per wavelength that share the medium, two geometries and three
 //! LAIs; sharing these parts divides the per-wavelength work.
 //!
+//! The per-wavelength functions ([`medium`], [`directional`], [`slab`], [`sail_parts`],
+//! [`mixed_reflectance`]) branch only through [`Real::select`], so they run on lanes of several
+//! wavelengths ([`crate::real::F64x4`]). The per-geometry ones ([`Lidf`], [`extinction`],
+//! [`layer`]) branch on [`Real::value`] and run once per spectrum on scalars; their results are
+//! broadcast to lanes with `map`.
+//!
 //! Details that follow the reference implementation because they change outputs: the `J1`
 //! function switches to its series form when `|(k − l)·LAI| ≤ 1e-3`, and in
 //! [`HotspotRule::Reference`] the hotspot parameter `alf` is capped at 200 (and set to 200 when
@@ -290,15 +296,25 @@ pub struct Extinction<R> {
     pub dso: R,
 }
 
+impl<R: Copy> Extinction<R> {
+    /// The terms with `f` applied to each (to broadcast them to lanes).
+    pub fn map<S>(&self, f: impl Fn(R) -> S) -> Extinction<S> {
+        Extinction {
+            ks: f(self.ks),
+            ko: f(self.ko),
+            bf: f(self.bf),
+            sob: f(self.sob),
+            sof: f(self.sof),
+            dso: f(self.dso),
+        }
+    }
+}
+
 /// Square root that is zero (with zero derivative) for arguments ≤ 0, so dual numbers stay finite
 /// at the hotspot and at exact zeros.
 #[inline]
 pub(crate) fn sqrt0<R: Real>(x: R) -> R {
-    if x.value() > 0.0 {
-        x.sqrt()
-    } else {
-        R::zero()
-    }
+    x.select(|v| v > 0.0, || x.sqrt(), R::zero)
 }
 
 /// `sqrt(tan²a + tan²b − 2 tan a tan b cos ψ)` given `tan a`, `tan b` and ψ, evaluated as
@@ -431,6 +447,21 @@ pub struct Layer<R> {
     pub alf: R,
 }
 
+impl<R: Copy> Layer<R> {
+    /// The terms with `f` applied to each (to broadcast them to lanes).
+    pub fn map<S>(&self, f: impl Fn(R) -> S) -> Layer<S> {
+        Layer {
+            lai: f(self.lai),
+            tss: f(self.tss),
+            too: f(self.too),
+            tsstoo: f(self.tsstoo),
+            sumint: f(self.sumint),
+            z: f(self.z),
+            alf: f(self.alf),
+        }
+    }
+}
+
 /// The layer terms for `lai` (> 0) with hotspot size `hotspot` (leaf size / canopy height).
 pub fn layer<R: Real>(e: &Extinction<R>, lai: R, hotspot: R, rule: HotspotRule) -> Layer<R> {
     let one = R::one();
@@ -536,8 +567,13 @@ pub fn medium<R: Real>(bf: R, leaf: LeafOptics<R>) -> Medium<R> {
     let sigf = ddf * rho + ddb * tau;
     let att = one - sigf;
     let m = sqrt0((att + sigb) * (att - sigb));
-    let rinf = (att - m) / sigb;
-    let inv_1m_rinf2 = one / (one - rinf * rinf);
+    // rinf = (att − m)/sigb = sigb/(att + m) (no cancellation when sigb is small), and
+    // 1 − rinf² = 2m/(att + m): both from one division (m > 0 for any absorbing leaf).
+    let u = att + m;
+    let two_m = R::c(2.0) * m;
+    let p = one / (two_m * u);
+    let rinf = sigb * two_m * p;
+    let inv_1m_rinf2 = u * u * p;
     Medium {
         rho,
         tau,
@@ -577,13 +613,10 @@ pub struct Directional<R> {
     pub inv_ko_p: R,
 }
 
+/// `1/x`, or 0 where `x` is exactly 0.
 #[inline]
 fn inv_or_zero<R: Real>(x: R) -> R {
-    if x.value() != 0.0 {
-        R::one() / x
-    } else {
-        R::zero()
-    }
+    x.select(|v| v != 0.0, || R::one() / x, R::zero)
 }
 
 /// The directional terms of medium `md` in geometry `e`.
@@ -601,6 +634,8 @@ pub fn directional<R: Real>(e: &Extinction<R>, md: &Medium<R>) -> Directional<R>
     let vf = dof * rho + dob * tau;
     let ks_m = e.ks - m;
     let ko_m = e.ko - m;
+    let (inv_ks_m, inv_ks_p) = inv_pair(e.ks, m);
+    let (inv_ko_m, inv_ko_p) = inv_pair(e.ko, m);
     Directional {
         s_down: sf + sb * rinf,
         s_up: sf * rinf + sb,
@@ -609,11 +644,20 @@ pub fn directional<R: Real>(e: &Extinction<R>, md: &Medium<R>) -> Directional<R>
         w: e.sob * rho + e.sof * tau,
         ks_m,
         ko_m,
-        inv_ks_m: inv_or_zero(ks_m),
-        inv_ko_m: inv_or_zero(ko_m),
-        inv_ks_p: R::one() / (e.ks + m),
-        inv_ko_p: R::one() / (e.ko + m),
+        inv_ks_m,
+        inv_ko_m,
+        inv_ks_p,
+        inv_ko_p,
     }
+}
+
+/// `(1/(k − m), 1/(k + m))` from one division; the first is 0 where `k = m` exactly (where
+/// `J1` uses its series form instead).
+#[inline]
+fn inv_pair<R: Real>(k: R, m: R) -> (R, R) {
+    let (d, s) = (k - m, k + m);
+    let q = inv_or_zero(d * s);
+    (s * q, d.select(|v| v != 0.0, || d * q, || R::one() / s))
 }
 
 /// Per wavelength diffuse terms of a layer of the medium with a given LAI, shared by every
@@ -679,11 +723,11 @@ pub struct SailOutput<R> {
 #[inline]
 fn jfunc1<R: Real>(k_m: R, inv_k_m: R, t: R, emt: R, ekt: R) -> R {
     let del = k_m * t;
-    if del.value().abs() > J1_SERIES_THRESHOLD {
-        (emt - ekt) * inv_k_m
-    } else {
-        R::c(0.5) * t * (ekt + emt) * (R::one() - del * del / R::c(12.0))
-    }
+    del.select(
+        |d| libm::fabs(d) > J1_SERIES_THRESHOLD,
+        || (emt - ekt) * inv_k_m,
+        || R::c(0.5) * t * (ekt + emt) * (R::one() - del * del / R::c(12.0)),
+    )
 }
 
 /// 4SAIL at one wavelength: layer `l` (geometry `e`) of medium `md` over background reflectance
@@ -791,10 +835,20 @@ pub fn skyl<R: Real>(tts: R) -> R {
 /// Reflectance under mixed direct (`es`) and diffuse (`ed`) irradiance with diffuse fraction
 /// `skyl`: `(rdot·skyl·ed + rsot·(1 − skyl)·es) / ((1 − skyl)·es + skyl·ed)`.
 #[inline]
-pub fn mixed_reflectance<R: Real>(rsot: R, rdot: R, skyl: R, es: f64, ed: f64) -> R {
-    let dir = (R::one() - skyl) * R::c(es);
-    let dif = skyl * R::c(ed);
-    (rdot * dif + rsot * dir) / (dir + dif)
+pub fn mixed_reflectance<R: Real>(rsot: R, rdot: R, skyl: R, es: R::Plain, ed: R::Plain) -> R {
+    let (w_dir, w_dif) = irradiance_weights(skyl, es, ed);
+    rsot * w_dir + rdot * w_dif
+}
+
+/// The weights of the direct (`rsot`) and diffuse (`rdot`) reflectance in
+/// [`mixed_reflectance`]: `(1 − skyl)·es` and `skyl·ed`, normalised to sum 1 (one division,
+/// shared by every call with the same irradiance).
+#[inline]
+pub fn irradiance_weights<R: Real>(skyl: R, es: R::Plain, ed: R::Plain) -> (R, R) {
+    let dir = (R::one() - skyl).scale(es);
+    let dif = skyl.scale(ed);
+    let inv = R::one() / (dir + dif);
+    (dir * inv, dif * inv)
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 //! [`Resampling::new`] records the wavelength spans where any band has weight and the model is
 //! evaluated only there (884 of 2101 wavelengths for Sentinel-2).
 
-use crate::real::Real;
+use crate::real::{Lanes, Real};
 use crate::Error;
 
 /// Sentinel-2 band names in the order of the resampling matrix's columns.
@@ -16,6 +16,9 @@ pub const S2_BANDS: [&str; 13] = [
 
 /// Largest number of bands a [`Resampling`] handles.
 pub const MAX_BANDS: usize = 16;
+
+/// Largest number of lanes [`Resampling::integrate_lanes`] evaluates together.
+pub const MAX_LANES: usize = 8;
 
 /// A resampling matrix with the wavelength spans where it is non-zero.
 #[derive(Clone, Copy, Debug)]
@@ -111,11 +114,36 @@ impl<'a> Resampling<'a> {
 
     /// Number of wavelengths where some band has weight.
     pub fn n_active(&self) -> usize {
+        self.active().count()
+    }
+
+    fn check_out<R>(&self, out: &[R]) -> Result<(), Error> {
+        if out.len() != self.n_bands {
+            return Err(Error::SizeMismatch {
+                what: "band output",
+                expected: self.n_bands,
+                found: out.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The wavelength indices where some band has weight, in ascending order.
+    pub fn active(&self) -> impl Iterator<Item = usize> + '_ {
         self.spans()
             .iter()
             .flat_map(|&(a, b)| a..=b)
             .filter(|&i| self.weights(i).iter().any(|&w| w != 0.0))
-            .count()
+    }
+
+    /// Adds the value `r` at wavelength index `i`, weighted, to each band of `out`.
+    #[inline]
+    pub fn accumulate<R: Real>(&self, i: usize, r: R, out: &mut [R]) {
+        for (o, &wb) in out.iter_mut().zip(self.weights(i)) {
+            if wb != 0.0 {
+                *o += r.scale(<R::Plain as Real>::c(wb));
+            }
+        }
     }
 
     /// Integrates a spectrum given as a function of the wavelength index, evaluating it only
@@ -125,85 +153,50 @@ impl<'a> Resampling<'a> {
         mut spectrum: impl FnMut(usize) -> R,
         out: &mut [R],
     ) -> Result<(), Error> {
-        if out.len() != self.n_bands {
-            return Err(Error::SizeMismatch {
-                what: "band output",
-                expected: self.n_bands,
-                found: out.len(),
-            });
-        }
-        for o in out.iter_mut() {
-            *o = R::zero();
-        }
-        for &(a, b) in self.spans() {
-            for i in a..=b {
-                let w = self.weights(i);
-                if w.iter().all(|&x| x == 0.0) {
-                    continue;
-                }
-                let r = spectrum(i);
-                for (o, &wb) in out.iter_mut().zip(w) {
-                    if wb != 0.0 {
-                        *o += R::c(wb) * r;
-                    }
-                }
-            }
+        self.check_out(out)?;
+        out.iter_mut().for_each(|o| *o = R::zero());
+        for i in self.active() {
+            self.accumulate(i, spectrum(i), out);
         }
         Ok(())
     }
 
-    /// [`Resampling::integrate`] with the spectrum evaluated `L` wavelengths at a time:
-    /// `spectrum(indices)` returns the values at `indices` (the last batch is padded by repeating
-    /// its last index; the padding values are ignored).
-    pub fn integrate_lanes<R: Real, const L: usize>(
+    /// [`Resampling::integrate`] with the spectrum evaluated `W::WIDTH` wavelengths at a time
+    /// (at most [`MAX_LANES`]): `spectrum(indices)` returns lanes whose lane `j` is the value at
+    /// `indices[j]`. The last batch is padded by repeating its last index; the padding lanes are
+    /// ignored.
+    pub fn integrate_lanes<R: Real, W: Lanes<R>>(
         &self,
-        mut spectrum: impl FnMut(&[usize; L]) -> [R; L],
+        mut spectrum: impl FnMut(&[usize]) -> W,
         out: &mut [R],
     ) -> Result<(), Error> {
-        if out.len() != self.n_bands {
-            return Err(Error::SizeMismatch {
-                what: "band output",
-                expected: self.n_bands,
-                found: out.len(),
+        self.check_out(out)?;
+        if W::WIDTH == 0 || W::WIDTH > MAX_LANES {
+            return Err(Error::OutOfRange {
+                what: "number of lanes",
             });
         }
-        for o in out.iter_mut() {
-            *o = R::zero();
-        }
-        if L == 0 {
-            return Ok(());
-        }
-        let mut idx = [0usize; L];
+        out.iter_mut().for_each(|o| *o = R::zero());
+        let mut idx = [0usize; MAX_LANES];
         let mut n = 0;
-        let mut flush = |idx: &[usize; L], n: usize, out: &mut [R]| {
-            let mut batch = *idx;
-            for slot in batch[n..].iter_mut() {
-                *slot = idx[n - 1];
-            }
-            let values = spectrum(&batch);
-            for (&i, &r) in batch[..n].iter().zip(values[..n].iter()) {
-                for (o, &wb) in out.iter_mut().zip(self.weights(i)) {
-                    if wb != 0.0 {
-                        *o += R::c(wb) * r;
-                    }
-                }
+        let mut flush = |idx: &mut [usize; MAX_LANES], n: usize, out: &mut [R]| {
+            let last = idx[n - 1];
+            idx[n..W::WIDTH].iter_mut().for_each(|slot| *slot = last);
+            let values = spectrum(&idx[..W::WIDTH]);
+            for (j, &i) in idx[..n].iter().enumerate() {
+                self.accumulate(i, values.lane(j), out);
             }
         };
-        for &(a, b) in self.spans() {
-            for i in a..=b {
-                if self.weights(i).iter().all(|&x| x == 0.0) {
-                    continue;
-                }
-                idx[n] = i;
-                n += 1;
-                if n == L {
-                    flush(&idx, n, out);
-                    n = 0;
-                }
+        for i in self.active() {
+            idx[n] = i;
+            n += 1;
+            if n == W::WIDTH {
+                flush(&mut idx, n, out);
+                n = 0;
             }
         }
         if n > 0 {
-            flush(&idx, n, out);
+            flush(&mut idx, n, out);
         }
         Ok(())
     }
@@ -224,6 +217,7 @@ impl<'a> Resampling<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::real::F64x4;
 
     #[test]
     fn spans_and_integration() {
@@ -249,13 +243,20 @@ mod tests {
             .unwrap();
         assert_eq!(out, out2);
         let mut out3 = [0.0; 2];
-        r.integrate_lanes(|ix: &[usize; 2]| ix.map(|i| i as f64), &mut out3)
-            .unwrap();
+        r.integrate_lanes(|ix| ix[0] as f64, &mut out3).unwrap();
         assert_eq!(out, out3);
         let mut out4 = [0.0; 2];
-        r.integrate_lanes(|ix: &[usize; 4]| ix.map(|i| i as f64), &mut out4)
-            .unwrap();
-        assert_eq!(out, out4);
+        let mut batches = 0;
+        r.integrate_lanes(
+            |ix| {
+                batches += 1;
+                assert_eq!(ix, &[1, 2, 4, 4][..]);
+                F64x4(core::array::from_fn(|j| ix[j] as f64))
+            },
+            &mut out4,
+        )
+        .unwrap();
+        assert_eq!((out, batches), (out4, 1));
     }
 
     #[test]

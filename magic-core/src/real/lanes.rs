@@ -1,0 +1,597 @@
+//! SIMD lanes: several independent values of one scalar type computed together.
+//!
+//! [`F64x4`] and [`F32x4`] are [`Real`]s whose every operation acts lane by lane, so physics
+//! written once as scalar code runs on four independent inputs at a time (INFORM evaluates four
+//! wavelengths per call). The element-wise arithmetic compiles to SIMD instructions (two SSE2
+//! operations per `F64x4` operation on the baseline x86-64 target, one with AVX), and `F64x4`'s
+//! `exp` and `ln` are evaluated for all four lanes at once; other functions go lane by lane
+//! through `libm`.
+//!
+//! Every lane of an `F64x4` result equals, bit for bit, the `f64` result of the same operation
+//! on that lane (same operations in the same order; `exp` and `ln` follow `libm`'s algorithms
+//! step by step). The same holds for `F32x4` and `f32`.
+//!
+//! Lanes have no single value to branch on: code that may run on lanes branches through
+//! [`Real::select`] (each lane takes its own branch), never on [`Real::value`], which for lanes
+//! reports lane 0 only — correct when all lanes are equal, as for constants broadcast with
+//! [`Lanes::splat`].
+
+use super::{e1_f64, Real};
+use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
+
+/// A batch of values of scalar `S` computed together: [`F64x4`] for `f64`, [`F32x4`] for
+/// `f32`, and a scalar itself (one lane) for types such as [`super::Dual`] that carry their own
+/// parallelism (see [`Real::Lanes`]).
+pub trait Lanes<S: Real>: Real {
+    /// Number of lanes.
+    const WIDTH: usize;
+    /// Every lane equal to `v`.
+    fn splat(v: S) -> Self;
+    /// Lane `i` (`i < WIDTH`).
+    fn lane(self, i: usize) -> S;
+    /// Plain lanes holding `f(0), …, f(WIDTH − 1)`: how table columns are loaded, one
+    /// wavelength per lane.
+    fn plain_from_fn(f: impl FnMut(usize) -> f64) -> Self::Plain;
+}
+
+/// A plain float is also a batch of one: lanes of a single value.
+macro_rules! single_lane {
+    ($f:ty) => {
+        impl Lanes<$f> for $f {
+            const WIDTH: usize = 1;
+            #[inline]
+            fn splat(v: $f) -> Self {
+                v
+            }
+            #[inline]
+            fn lane(self, _i: usize) -> $f {
+                self
+            }
+            #[inline]
+            fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+                f(0) as $f
+            }
+        }
+    };
+}
+single_lane!(f64);
+single_lane!(f32);
+
+/// Four `f64` lanes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(align(32))]
+pub struct F64x4(pub [f64; 4]);
+
+/// Four `f32` lanes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(align(16))]
+pub struct F32x4(pub [f32; 4]);
+
+/// The arithmetic, comparison and per-lane function plumbing shared by both lane types.
+macro_rules! lane_type {
+    ($t:ident, $f:ty) => {
+        impl $t {
+            /// Applies `f` to every lane.
+            #[inline]
+            pub fn map(self, f: impl Fn($f) -> $f) -> Self {
+                let a = self.0;
+                $t([f(a[0]), f(a[1]), f(a[2]), f(a[3])])
+            }
+            /// Applies `f` lane by lane to two batches.
+            #[inline]
+            pub fn zip(self, o: Self, f: impl Fn($f, $f) -> $f) -> Self {
+                let (a, b) = (self.0, o.0);
+                $t([f(a[0], b[0]), f(a[1], b[1]), f(a[2], b[2]), f(a[3], b[3])])
+            }
+        }
+
+        impl PartialOrd for $t {
+            /// Ordered only when every lane compares the same way.
+            #[inline]
+            fn partial_cmp(&self, o: &Self) -> Option<core::cmp::Ordering> {
+                let first = self.0[0].partial_cmp(&o.0[0])?;
+                for i in 1..4 {
+                    if self.0[i].partial_cmp(&o.0[i])? != first {
+                        return None;
+                    }
+                }
+                Some(first)
+            }
+        }
+
+        impl Neg for $t {
+            type Output = Self;
+            #[inline]
+            fn neg(self) -> Self {
+                self.map(|a| -a)
+            }
+        }
+
+        lane_type!(@op $t, Add, add, AddAssign, add_assign, +);
+        lane_type!(@op $t, Sub, sub, SubAssign, sub_assign, -);
+        lane_type!(@op $t, Mul, mul, MulAssign, mul_assign, *);
+        lane_type!(@op $t, Div, div, DivAssign, div_assign, /);
+
+        impl Lanes<$t> for $t {
+            const WIDTH: usize = 1;
+            #[inline]
+            fn splat(v: $t) -> Self {
+                v
+            }
+            #[inline]
+            fn lane(self, _i: usize) -> $t {
+                self
+            }
+            #[inline]
+            fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+                Self::c(f(0))
+            }
+        }
+
+        impl Lanes<$f> for $t {
+            const WIDTH: usize = 4;
+            #[inline]
+            fn splat(v: $f) -> Self {
+                $t([v; 4])
+            }
+            #[inline]
+            fn lane(self, i: usize) -> $f {
+                self.0[i]
+            }
+            #[inline]
+            fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+                $t([f(0) as $f, f(1) as $f, f(2) as $f, f(3) as $f])
+            }
+        }
+    };
+    (@op $t:ident, $tr:ident, $m:ident, $tra:ident, $ma:ident, $op:tt) => {
+        impl $tr for $t {
+            type Output = Self;
+            #[inline]
+            fn $m(self, o: Self) -> Self {
+                let (a, b) = (self.0, o.0);
+                $t([a[0] $op b[0], a[1] $op b[1], a[2] $op b[2], a[3] $op b[3]])
+            }
+        }
+        impl $tra for $t {
+            #[inline]
+            fn $ma(&mut self, o: Self) {
+                *self = *self $op o;
+            }
+        }
+    };
+}
+
+lane_type!(F64x4, f64);
+lane_type!(F32x4, f32);
+
+/// The [`Real`] items that are the same for both lane types (`$f` the lane type, `$lib` the
+/// module with its scalar functions).
+macro_rules! lane_real_common {
+    ($t:ident, $f:ty) => {
+        type Plain = $t;
+        type Lanes = $t;
+        #[inline]
+        fn c(v: f64) -> Self {
+            $t([v as $f; 4])
+        }
+        /// Lane 0 (see the module documentation: meaningful when all lanes are equal).
+        #[inline]
+        fn value(self) -> f64 {
+            self.0[0] as f64
+        }
+        #[inline]
+        fn scale(self, k: Self) -> Self {
+            self * k
+        }
+        #[inline]
+        fn from_plain(k: Self) -> Self {
+            k
+        }
+        #[inline]
+        fn select(
+            self,
+            pred: impl Fn(f64) -> bool,
+            a: impl FnOnce() -> Self,
+            b: impl FnOnce() -> Self,
+        ) -> Self {
+            let s = self.0;
+            let take = [
+                pred(s[0] as f64),
+                pred(s[1] as f64),
+                pred(s[2] as f64),
+                pred(s[3] as f64),
+            ];
+            if take.iter().all(|&t| t) {
+                return a();
+            }
+            if !take.iter().any(|&t| t) {
+                return b();
+            }
+            let (a, b) = (a(), b());
+            let pick = |i: usize| if take[i] { a.0[i] } else { b.0[i] };
+            $t([pick(0), pick(1), pick(2), pick(3)])
+        }
+        #[inline]
+        fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
+            self.map(|x| f(x as f64).0 as $f)
+        }
+        #[inline]
+        fn abs(self) -> Self {
+            self.map(|x| if x < 0.0 { -x } else { x })
+        }
+        #[inline]
+        fn max(self, o: Self) -> Self {
+            self.zip(o, |a, b| if a >= b { a } else { b })
+        }
+        #[inline]
+        fn min(self, o: Self) -> Self {
+            self.zip(o, |a, b| if a <= b { a } else { b })
+        }
+        #[inline]
+        fn is_finite(self) -> bool {
+            self.0.iter().all(|x| x.is_finite())
+        }
+    };
+}
+
+impl Real for F64x4 {
+    lane_real_common!(F64x4, f64);
+    #[inline]
+    fn sqrt(self) -> Self {
+        self.map(libm::sqrt)
+    }
+    #[inline]
+    fn exp(self) -> Self {
+        F64x4(exp4(self.0))
+    }
+    #[inline]
+    fn ln(self) -> Self {
+        F64x4(ln4(self.0))
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        self.map(libm::sin)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        self.map(libm::cos)
+    }
+    #[inline]
+    fn tan(self) -> Self {
+        self.map(libm::tan)
+    }
+    #[inline]
+    fn acos(self) -> Self {
+        self.map(libm::acos)
+    }
+    #[inline]
+    fn asin(self) -> Self {
+        self.map(libm::asin)
+    }
+    #[inline]
+    fn atan(self) -> Self {
+        self.map(libm::atan)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        self.zip(x, libm::atan2)
+    }
+    #[inline]
+    fn powf(self, e: Self) -> Self {
+        self.zip(e, libm::pow)
+    }
+    #[inline]
+    fn powi(self, n: i32) -> Self {
+        self.map(|x| libm::pow(x, n as f64))
+    }
+    #[inline]
+    fn e1(self) -> Self {
+        self.map(e1_f64)
+    }
+    #[inline]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let ex = (-self).exp();
+        (super::e1::e1_with_exp4(self, ex), ex)
+    }
+}
+
+impl Real for F32x4 {
+    lane_real_common!(F32x4, f32);
+    #[inline]
+    fn sqrt(self) -> Self {
+        self.map(libm::sqrtf)
+    }
+    #[inline]
+    fn exp(self) -> Self {
+        self.map(libm::expf)
+    }
+    #[inline]
+    fn ln(self) -> Self {
+        self.map(libm::logf)
+    }
+    #[inline]
+    fn sin(self) -> Self {
+        self.map(libm::sinf)
+    }
+    #[inline]
+    fn cos(self) -> Self {
+        self.map(libm::cosf)
+    }
+    #[inline]
+    fn tan(self) -> Self {
+        self.map(libm::tanf)
+    }
+    #[inline]
+    fn acos(self) -> Self {
+        self.map(libm::acosf)
+    }
+    #[inline]
+    fn asin(self) -> Self {
+        self.map(libm::asinf)
+    }
+    #[inline]
+    fn atan(self) -> Self {
+        self.map(libm::atanf)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        self.zip(x, libm::atan2f)
+    }
+    #[inline]
+    fn powf(self, e: Self) -> Self {
+        self.zip(e, libm::powf)
+    }
+    #[inline]
+    fn powi(self, n: i32) -> Self {
+        self.map(|x| libm::powf(x, n as f32))
+    }
+    #[inline]
+    fn e1(self) -> Self {
+        self.map(|x| e1_f64(x as f64) as f32)
+    }
+}
+
+/// A lane mask: all bits set where `f` holds. Masks and bitwise blends (rather than `bool`s and
+/// `if`) keep the lane-wise code free of branches, so it compiles to SIMD compares and blends.
+#[inline(always)]
+pub(crate) fn mask(x: F64x4, f: impl Fn(f64) -> bool) -> [u64; 4] {
+    let m = |v: f64| if f(v) { u64::MAX } else { 0 };
+    [m(x.0[0]), m(x.0[1]), m(x.0[2]), m(x.0[3])]
+}
+
+/// Whether every lane of the mask is set.
+#[inline(always)]
+pub(crate) fn all(m: [u64; 4]) -> bool {
+    m[0] & m[1] & m[2] & m[3] == u64::MAX
+}
+
+/// Whether some lane of the mask is set.
+#[inline(always)]
+pub(crate) fn any(m: [u64; 4]) -> bool {
+    m[0] | m[1] | m[2] | m[3] != 0
+}
+
+/// `a` in the lanes where `c` is set, else `b`.
+#[inline(always)]
+pub(crate) fn blend(c: [u64; 4], a: F64x4, b: F64x4) -> F64x4 {
+    let pick = |i: usize| f64::from_bits((a.0[i].to_bits() & c[i]) | (b.0[i].to_bits() & !c[i]));
+    F64x4([pick(0), pick(1), pick(2), pick(3)])
+}
+
+/// Lanes rounded toward zero, for magnitudes below 2^51 (as `as i32` does in `e_exp.c`).
+#[inline(always)]
+fn trunc_small(t: F64x4) -> F64x4 {
+    // 2^52 + 2^51: adding and subtracting it rounds to the nearest integer.
+    let round = F64x4::c(6_755_399_441_055_744.0);
+    let n = (t + round) - round;
+    let one = F64x4::c(1.0);
+    let zero = F64x4::c(0.0);
+    // Step back toward zero where rounding went away from it.
+    let down = blend(mask(n - t, |d| d > 0.0), one, zero);
+    let up = blend(mask(t - n, |d| d > 0.0), one, zero);
+    let nonneg = mask(t, |v| v >= 0.0);
+    n - blend(nonneg, down, zero) + blend(nonneg, zero, up)
+}
+
+/// `2^k` for integer-valued lanes `k` in [−1022, 1023], built from exponent bits.
+#[inline(always)]
+fn pow2(k: F64x4) -> F64x4 {
+    // The low bits of 2^52 + (k + 1023) hold k + 1023; shifted into the exponent field.
+    (k + F64x4::c(1023.0 + 4_503_599_627_370_496.0)).map(|v| f64::from_bits(v.to_bits() << 52))
+}
+
+/// The lanes of `x` (one function per lane) as an `F64x4`.
+#[inline(always)]
+pub(crate) fn ln4_of(x: F64x4) -> F64x4 {
+    F64x4(ln4(x.0))
+}
+
+/// `e^x` for four lanes: `libm::exp` (FreeBSD's `e_exp.c`) step by step, with its branches as
+/// blends, for |x| < 708.39; lanes outside that range (or NaN) send the batch through
+/// `libm::exp`.
+#[inline]
+fn exp4(x: [f64; 4]) -> [f64; 4] {
+    // Boundaries of e_exp.c, as |x| thresholds (its tests on the high word of |x|).
+    const SPECIAL: f64 = f64::from_bits(0x4086_232b_0000_0000); // ≈ 708.39
+    const REDUCE: f64 = f64::from_bits(0x3fd6_2e43_0000_0000); // > 0.5·ln 2
+    const FAR: f64 = f64::from_bits(0x3ff0_a2b2_0000_0000); // ≥ 1.5·ln 2
+    const TINY: f64 = f64::from_bits(0x3e30_0001_0000_0000); // > 2^-28
+    const LN2HI: f64 = 6.93147180369123816490e-01;
+    const LN2LO: f64 = 1.90821492927058770002e-10;
+    const INVLN2: f64 = 1.44269504088896338700e+00;
+    const P1: f64 = 1.66666666666666019037e-01;
+    const P2: f64 = -2.77777777770155933842e-03;
+    const P3: f64 = 6.61375632143793436117e-05;
+    const P4: f64 = -1.65339022054652515390e-06;
+    const P5: f64 = 4.13813679705723846039e-08;
+    let c = F64x4::c;
+    let x = F64x4(x);
+    let ax = x.map(|v| f64::from_bits(v.to_bits() & !(1 << 63)));
+    if !all(mask(ax, |a| a < SPECIAL)) {
+        return x.0.map(libm::exp);
+    }
+    // Argument reduction x = k·ln 2 + r: k = ±1 just above 0.5·ln 2, rounded x/ln 2 beyond
+    // 1.5·ln 2, 0 below 0.5·ln 2.
+    // ±0.5 with the sign of x.
+    let half = x.map(|v| f64::from_bits(0.5f64.to_bits() | (v.to_bits() & (1 << 63))));
+    let k_far = trunc_small(c(INVLN2) * x + half);
+    let k = blend(
+        mask(ax, |a| a >= FAR),
+        k_far,
+        blend(mask(ax, |a| a >= REDUCE), half + half, c(0.0)),
+    );
+    let hi = x - k * c(LN2HI);
+    let lo = k * c(LN2LO);
+    let r = hi - lo;
+    let xx = r * r;
+    let p = r - xx * (c(P1) + xx * (c(P2) + xx * (c(P3) + xx * (c(P4) + xx * c(P5)))));
+    let y = c(1.0) + (r * p / (c(2.0) - p) - lo + hi);
+    blend(mask(ax, |a| a < TINY), c(1.0) + x, y * pow2(k)).0
+}
+
+/// `ln x` for four lanes: `libm::log` (FreeBSD's `e_log.c`) step by step, for positive normal
+/// finite `x`; other lanes send the batch through `libm::log`.
+#[inline]
+fn ln4(x: [f64; 4]) -> [f64; 4] {
+    const LN2_HI: f64 = 6.93147180369123816490e-01;
+    const LN2_LO: f64 = 1.90821492927058770002e-10;
+    const LG1: f64 = 6.666666666666735130e-01;
+    const LG2: f64 = 3.999999999940941908e-01;
+    const LG3: f64 = 2.857142874366239149e-01;
+    const LG4: f64 = 2.222219843214978396e-01;
+    const LG5: f64 = 1.818357216161805012e-01;
+    const LG6: f64 = 1.531383769920937332e-01;
+    const LG7: f64 = 1.479819860511658591e-01;
+    let c = F64x4::c;
+    let x = F64x4(x);
+    if !all(mask(x, |v| (f64::MIN_POSITIVE..f64::INFINITY).contains(&v))) {
+        return x.0.map(libm::log);
+    }
+    // x = m·2^k with m in [sqrt(2)/2, sqrt(2)], on the high word as e_log.c does: the offset
+    // moves the mantissa boundary to sqrt(2)/2, the exponent field then holds k + 1023.
+    const OFFSET: u64 = (0x3ff0_0000 - 0x3fe6_a09e) << 32;
+    let ui = x.map(|v| f64::from_bits(v.to_bits() + OFFSET));
+    // k, converted exactly through the low bits of 2^52.
+    let dk = ui.map(|u| f64::from_bits((u.to_bits() >> 52) | 0x4330_0000_0000_0000))
+        - c(4_503_599_627_370_496.0 + 1023.0);
+    let m = ui.map(|u| f64::from_bits((u.to_bits() & 0x000f_ffff_ffff_ffff) + (0x3fe6_a09e << 32)));
+    let f = m - c(1.0);
+    let hfsq = c(0.5) * f * f;
+    let s = f / (c(2.0) + f);
+    let z = s * s;
+    let w = z * z;
+    let t1 = w * (c(LG2) + w * (c(LG4) + w * c(LG6)));
+    let t2 = z * (c(LG1) + w * (c(LG3) + w * (c(LG5) + w * c(LG7))));
+    let r = t2 + t1;
+    (s * (hfsq + r) + dk * c(LN2_LO) - hfsq + f + dk * c(LN2_HI)).0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic spread of arguments (xorshift), scaled into `[lo, hi]`.
+    fn spread(n: usize, lo: f64, hi: f64) -> impl Iterator<Item = f64> {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        (0..n).map(move |_| {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            lo + (hi - lo) * ((s >> 11) as f64 / (1u64 << 53) as f64)
+        })
+    }
+
+    /// Checks `f4` against `f` on every value of `xs`, four at a time.
+    fn check4(f4: fn([f64; 4]) -> [f64; 4], f: fn(f64) -> f64, xs: impl Iterator<Item = f64>) {
+        let mut a = [0.0; 4];
+        let mut n = 0;
+        let check = |a: &[f64; 4]| {
+            for (xi, yi) in a.iter().zip(f4(*a)) {
+                let want = f(*xi);
+                assert!(
+                    yi.to_bits() == want.to_bits() || (yi.is_nan() && want.is_nan()),
+                    "x {xi:e}: {yi:e} vs {want:e}"
+                );
+            }
+        };
+        for x in xs {
+            a[n] = x;
+            n += 1;
+            if n == 4 {
+                check(&a);
+                n = 0;
+            }
+        }
+        if n > 0 {
+            check(&a);
+        }
+    }
+
+    #[test]
+    fn exp_is_libm_bit_for_bit() {
+        let special = [
+            0.0,
+            -0.0,
+            1e-300,
+            0.34657359027997264,
+            1.0397207708399179,
+            -1.0397207708399179,
+            708.39,
+            -708.39,
+            -745.2,
+            710.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        let xs = spread(20_000, -750.0, 750.0)
+            .chain(spread(20_000, -2.0, 2.0))
+            .chain(spread(4_000, -1e-7, 1e-7))
+            .chain(special);
+        check4(exp4, libm::exp, xs);
+        // One special lane among ordinary ones.
+        check4(exp4, libm::exp, [0.5, f64::NAN, -3.0, 800.0].into_iter());
+    }
+
+    #[test]
+    fn ln_is_libm_bit_for_bit() {
+        let special = [
+            1.0,
+            0.0,
+            -1.0,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NAN,
+            core::f64::consts::SQRT_2,
+            core::f64::consts::FRAC_1_SQRT_2,
+        ];
+        let xs = spread(20_000, 0.0, 10.0)
+            .chain(spread(20_000, 0.5, 2.0))
+            .chain(spread(4_000, 0.0, 1e-300))
+            .chain(spread(4_000, 0.0, 1e300))
+            .chain(special);
+        check4(ln4, libm::log, xs);
+    }
+
+    #[test]
+    fn lanes_follow_their_own_branches() {
+        let x = F64x4([-1.0, 0.5, 2.0, -0.0]);
+        let y = x.select(|v| v > 0.0, || x.sqrt(), || F64x4::c(7.0));
+        assert_eq!(y.0, [7.0, libm::sqrt(0.5), libm::sqrt(2.0), 7.0]);
+        assert_eq!(x.abs().0, [1.0, 0.5, 2.0, 0.0]);
+        assert_eq!(x.max(F64x4::c(0.25)).0, [0.25, 0.5, 2.0, 0.25]);
+        assert!(F64x4([1.0, 2.0, 3.0, 4.0]) < F64x4::c(5.0));
+        assert_eq!(
+            F64x4([1.0, 6.0, 3.0, 4.0]).partial_cmp(&F64x4::c(5.0)),
+            None
+        );
+        let f = F32x4([1.0, 2.0, 3.0, 4.0]);
+        assert_eq!((f * f - f).0, [0.0, 2.0, 6.0, 12.0]);
+        assert_eq!(<F32x4 as Lanes<f32>>::lane(f.exp(), 2), libm::expf(3.0));
+        let p = <F64x4 as Lanes<f64>>::plain_from_fn(|i| i as f64);
+        assert_eq!(p.0, [0.0, 1.0, 2.0, 3.0]);
+    }
+}
