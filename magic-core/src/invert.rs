@@ -168,7 +168,10 @@ pub fn invert_into<R: Real, P: Problems>(
     let mut g = 0usize;
     let mut z = [0f32; MAX_OBS];
     let mut observed = 0usize;
+    // (The mean and scale are read in order, by iterators: no bounds checks in the loop.)
+    let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
     for (i, (&x, zi)) in obs.iter().zip(z.iter_mut()).enumerate() {
+        let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
         let bit = 1u32.wrapping_shl(g as u32);
         g += 1;
         if g >= groups {
@@ -180,19 +183,19 @@ pub fn invert_into<R: Real, P: Problems>(
         if track {
             used |= bit;
         }
-        if x.is_infinite() {
-            return Err(Error::NonFinite {
-                what: "observation",
-                index: i,
-            });
-        }
         // (1e4 is exact in f32: the same test as in f64.)
         if x.abs() > MAX_ABS_OBS as f32 {
+            if x.is_infinite() {
+                return Err(Error::NonFinite {
+                    what: "observation",
+                    index: i,
+                });
+            }
             return Err(Error::OutOfRange {
                 what: "observation magnitude",
             });
         }
-        *zi = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
+        *zi = (x - mean) / scale;
         observed += 1;
     }
     let n_params = model.n_params();
@@ -212,9 +215,11 @@ pub fn invert_into<R: Real, P: Problems>(
     if observed < n_obs {
         // Missing channels: refill them with the model's own reconstruction and invert again.
         for _ in 0..IMPUTE_PASSES {
-            for (i, ((zi, x), r)) in z.iter_mut().zip(obs).zip(&out.recon).enumerate() {
+            let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
+            for ((zi, x), r) in z.iter_mut().zip(obs).zip(&out.recon) {
+                let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
                 if x.is_nan() {
-                    *zi = (R::value(*r) as f32 - model.obs_mean.get(i)) / model.obs_scale.get(i);
+                    *zi = (R::value(*r) as f32 - mean) / scale;
                 }
             }
             at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, out)?;
@@ -238,13 +243,15 @@ pub fn invert_into<R: Real, P: Problems>(
 
     // The residual over the observed channels, in R.
     let (mut ss, mut ss_std) = (R::zero(), R::zero());
-    for (i, (&x, &rec)) in obs.iter().zip(&out.recon).enumerate() {
+    let mut scales = model.obs_scale.iter();
+    for (&x, &rec) in obs.iter().zip(&out.recon) {
+        let scale = scales.next().unwrap_or(0.0);
         if x.is_nan() {
             continue;
         }
         let r = R::c(x as f64) - rec;
         ss += r * r;
-        let rs = r / R::c(model.obs_scale.get(i) as f64);
+        let rs = r / R::c(scale as f64);
         ss_std += rs * rs;
     }
     // (`observed` ≤ MAX_OBS: exact in f32.)
@@ -306,8 +313,10 @@ fn pass<R: Real, P: Problems>(
             )?;
             if model.variant == Variant::C {
                 let input = ws.nn.input();
-                for (i, (f, p)) in input.iter_mut().zip(&out.physics[..n_obs]).enumerate() {
-                    *f = (R::value(*p) as f32 - model.obs_mean.get(i)) / model.obs_scale.get(i);
+                let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
+                for (f, p) in input.iter_mut().zip(&out.physics[..n_obs]) {
+                    let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
+                    *f = (R::value(*p) as f32 - mean) / scale;
                 }
                 let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
                 destandardise(model, y, &mut out.recon[..n_obs])?;
@@ -392,8 +401,10 @@ fn destandardise<R: Real>(model: &Model<'_>, y: &[f32], out: &mut [R]) -> Result
             found: y.len(),
         });
     }
-    for (i, (o, v)) in out.iter_mut().zip(y).enumerate() {
-        *o = R::c((v * model.obs_scale.get(i) + model.obs_mean.get(i)) as f64);
+    let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
+    for (o, v) in out.iter_mut().zip(y) {
+        let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
+        *o = R::c((v * scale + mean) as f64);
     }
     Ok(())
 }

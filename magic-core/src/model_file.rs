@@ -13,7 +13,9 @@
 //! Format versions: 3 added the RTM problem; 4 stores a Mogi network's stations as borrowed
 //! little-endian `f64` bytes ([`Stations`]) and its names as one borrowed comma-separated string
 //! ([`Names`]) instead of fixed-capacity vectors, which makes the decoded [`Model`] small enough
-//! to decode within a microcontroller's stack budget.
+//! to decode within a microcontroller's stack budget; 5 stores int8 weights in blocks of four
+//! rows ([`crate::quant::blocked_index`]) after 0–3 bytes of padding that align them to four bytes
+//! in the file (the `SMLAD` kernel's layout).
 
 use crate::effects::{Effect, MAX_EFFECTS};
 use crate::mogi::{self, Stations};
@@ -27,7 +29,7 @@ use serde::{Deserialize, Serialize};
 /// The first four bytes of every model file.
 pub const MAGIC: [u8; 4] = *b"MAGC";
 /// The format version this build reads and writes.
-pub const VERSION: u16 = 4;
+pub const VERSION: u16 = 5;
 /// Largest station network the compiled core accepts.
 pub const MAX_STATIONS: usize = 32;
 /// Largest number of physical variables (source parameters plus effect parameters).

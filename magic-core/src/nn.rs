@@ -44,7 +44,13 @@ pub enum Weights<'a> {
     },
     /// int8 weights, symmetric per output row.
     Int8 {
-        /// Weights, row-major `rows × cols`, one byte each (two's complement).
+        /// Alignment padding (0 to 3 bytes, contents ignored): the exporter chooses its length so
+        /// that `w` starts at a multiple of four bytes from the start of the model file, which
+        /// lets the `SMLAD` kernel load weights with `LDM` (an embedded file is word aligned).
+        #[serde(borrow)]
+        pad: &'a [u8],
+        /// Weights `rows × cols`, one byte each (two's complement), in blocks of four rows
+        /// interleaved by groups of four columns: see [`crate::quant::blocked_index`].
         #[serde(borrow)]
         w: &'a [u8],
         /// Bias in accumulator units (`bias / (w_scale[r] · in_scale)`).
@@ -114,6 +120,7 @@ impl Layer<'_> {
                 }
             }
             Weights::Int8 {
+                pad,
                 w,
                 bias,
                 w_scale,
@@ -122,6 +129,11 @@ impl Layer<'_> {
                 in_scale,
                 out_scale,
             } => {
+                if pad.len() > 3 {
+                    return Err(Error::InvalidModel(
+                        "int8 layer padding longer than 3 bytes",
+                    ));
+                }
                 len("int8 layer weight bytes", w.len(), r * c)?;
                 len("int8 layer bias bytes", bias.0.len(), 4 * r)?;
                 len("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
@@ -544,6 +556,7 @@ mod tests {
             cols: 2,
             act: Activation::Relu,
             weights: Weights::Int8 {
+                pad: &[],
                 w,
                 bias: LeI32(&[0; 8]),
                 w_scale: LeF32(&[0, 0, 128, 63, 0, 0, 128, 63]),
@@ -641,7 +654,9 @@ mod tests {
                     let next_int8 = next.is_some_and(|n| n.is_int8());
                     let accs: std::vec::Vec<i32> = (0..rows)
                         .map(|r| {
-                            dot_i8(&w[r * cols..(r + 1) * cols], &q).saturating_add(bias.get(r))
+                            let mut row = std::vec![0u8; cols];
+                            crate::quant::blocked_row(w, rows, cols, r, &mut row);
+                            dot_i8(&row, &q).saturating_add(bias.get(r))
                         })
                         .collect();
                     if next_int8 {
@@ -702,7 +717,9 @@ mod tests {
                     mult.extend_from_slice(&mq.to_le_bytes());
                     shift.push(sh as u8);
                 }
-                [w, bias, w_scale, mult, shift]
+                let mut blocked = std::vec![0u8; rows * cols];
+                crate::quant::block_rows(&w, rows, cols, &mut blocked).unwrap();
+                [blocked, bias, w_scale, mult, shift]
             })
             .collect()
     }
@@ -736,6 +753,7 @@ mod tests {
                         Activation::Relu
                     },
                     weights: Weights::Int8 {
+                        pad: &[],
                         w: &b[0],
                         bias: LeI32(&b[1]),
                         w_scale: LeF32(&b[2]),

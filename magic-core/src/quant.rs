@@ -11,6 +11,7 @@
 //! Multi-byte values live in the model file as little-endian byte slices (weights borrowed straight
 //! from flash, no alignment requirement); [`LeF32`] and [`LeI32`] read them.
 
+use crate::Error;
 use serde::{Deserialize, Serialize};
 
 /// A borrowed little-endian `f32` array inside a model file.
@@ -271,27 +272,87 @@ pub fn dot_i8_packed(w: &[u8], xp: &[u32]) -> i32 {
     }
 }
 
-/// Integer dot products of two consecutive rows of `cols` int8 weights (`w[..cols]` and
-/// `w[cols..2 · cols]`) with the same packed activations: `[dot_i8_packed(row 0, xp),
-/// dot_i8_packed(row 1, xp)]`, exactly. Rows missing from `w` give 0.
+/// Byte offset of weight `(r, c)` of a `rows × cols` int8 layer in the model file's blocked
+/// layout (format version 5).
 ///
-/// With the `dsp` feature on ARM this is the row-blocked `SMLAD` kernel of the `dsp` module (each
-/// activation word is loaded once for both rows); elsewhere [`dot2_i8_packed_portable`].
+/// Rows are stored in blocks of four (the last block holds the `rows % 4` left over, if any);
+/// within a block of `b` rows, for each whole group of four columns, the group's four bytes of
+/// each row of the block, row after row (`4 · b` bytes per group); then the columns past the last
+/// whole group (`cols % 4` of them), row after row. A block is thus `b · cols` bytes and the
+/// matrix `rows · cols` bytes, as in row-major order. With this layout the `SMLAD` kernel loads
+/// the weights of two rows with one `LDM` and each activation word once for four rows.
 #[inline]
-pub fn dot2_i8_packed(w: &[u8], cols: usize, xp: &[u32]) -> [i32; 2] {
-    #[cfg(all(feature = "dsp", target_arch = "arm"))]
-    {
-        dsp::dot2_i8_packed(w, cols, xp)
-    }
-    #[cfg(not(all(feature = "dsp", target_arch = "arm")))]
-    {
-        dot2_i8_packed_portable(w, cols, xp)
+pub fn blocked_index(rows: usize, cols: usize, r: usize, c: usize) -> usize {
+    let blk = r / 4;
+    let b = rows.saturating_sub(4 * blk).min(4);
+    let (i, whole) = (r % 4, cols / 4 * 4);
+    let base = 4 * blk * cols;
+    if c < whole {
+        base + (c / 4) * 4 * b + 4 * i + c % 4
+    } else {
+        base + whole * b + i * (cols - whole) + (c - whole)
     }
 }
 
-/// All rows of a `rows × cols` int8 matrix `w` (row-major) times packed activations `xp`:
-/// `acc[r] = dot_i8_packed(row r, xp)` for `r < min(rows, acc.len())`, rows two at a time with
-/// [`dot2_i8_packed`]. Rows missing from `w` give 0.
+/// Rearranges a row-major `rows × cols` int8 matrix into the blocked layout of
+/// [`blocked_index`] (`src` and `dst` both `rows · cols` bytes).
+pub fn block_rows(src: &[u8], rows: usize, cols: usize, dst: &mut [u8]) -> Result<(), Error> {
+    let n = rows
+        .checked_mul(cols)
+        .ok_or(Error::BufferTooSmall { needed: usize::MAX })?;
+    if src.len() != n || dst.len() != n {
+        return Err(Error::SizeMismatch {
+            what: "int8 weight bytes",
+            expected: n,
+            found: src.len().min(dst.len()),
+        });
+    }
+    for r in 0..rows {
+        for c in 0..cols {
+            if let (Some(d), Some(&v)) = (
+                dst.get_mut(blocked_index(rows, cols, r, c)),
+                src.get(r * cols + c),
+            ) {
+                *d = v;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The inverse of [`block_rows`]: blocked layout back to row-major.
+pub fn unblock_rows(src: &[u8], rows: usize, cols: usize, dst: &mut [u8]) -> Result<(), Error> {
+    let n = rows
+        .checked_mul(cols)
+        .ok_or(Error::BufferTooSmall { needed: usize::MAX })?;
+    if src.len() != n || dst.len() != n {
+        return Err(Error::SizeMismatch {
+            what: "int8 weight bytes",
+            expected: n,
+            found: src.len().min(dst.len()),
+        });
+    }
+    for r in 0..rows {
+        blocked_row(src, rows, cols, r, &mut dst[r * cols..(r + 1) * cols]);
+    }
+    Ok(())
+}
+
+/// Row `r` of a blocked `rows × cols` matrix into `out` (`out.len()` columns; bytes missing from
+/// `w` read as 0).
+pub fn blocked_row(w: &[u8], rows: usize, cols: usize, r: usize, out: &mut [u8]) {
+    for (c, o) in out.iter_mut().enumerate() {
+        *o = w.get(blocked_index(rows, cols, r, c)).copied().unwrap_or(0);
+    }
+}
+
+/// All rows of a `rows × cols` int8 matrix `w` in the blocked layout of [`blocked_index`] times
+/// packed activations `xp`: `acc[r] = dot_i8(row r, x)` for `r < min(rows, acc.len())`
+/// (exactly; sums wrap like `SMLAD`'s). Weights missing from `w` and activation words missing
+/// from `xp` count as 0.
+///
+/// With the `dsp` feature on ARM this is the `SMLAD` kernel of the `dsp` module, four rows per
+/// pass over the activations; elsewhere [`matvec_i8_packed_portable`].
 pub fn matvec_i8_packed(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mut [i32]) {
     #[cfg(all(feature = "dsp", target_arch = "arm"))]
     {
@@ -303,27 +364,34 @@ pub fn matvec_i8_packed(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mu
     }
 }
 
-/// [`matvec_i8_packed`] in plain Rust.
+/// [`matvec_i8_packed`] in plain Rust, lane by lane as `SXTB16`/`SMLAD` compute it.
 pub fn matvec_i8_packed_portable(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mut [i32]) {
     let rows = rows.min(acc.len());
-    for (p, out) in acc[..rows].chunks_mut(2).enumerate() {
-        let r = 2 * p;
-        let rest = w.get(r * cols..).unwrap_or(&[]);
-        match out {
-            [a0, a1] => [*a0, *a1] = dot2_i8_packed_portable(rest, cols, xp),
-            [a0] => *a0 = dot_i8_packed(rest.get(..cols).unwrap_or(&[]), xp),
-            _ => {}
-        }
+    for (r, a) in acc[..rows].iter_mut().enumerate() {
+        *a = blocked_row_dot(w, rows, cols, r, xp);
     }
 }
 
-/// [`dot2_i8_packed`] in plain Rust (two calls of [`dot_i8_packed_portable`]).
-pub fn dot2_i8_packed_portable(w: &[u8], cols: usize, xp: &[u32]) -> [i32; 2] {
-    let row = |r: usize| {
-        w.get(r * cols..(r + 1) * cols)
-            .map_or(0, |row| dot_i8_packed_portable(row, xp))
+/// Row `r` of a blocked matrix times packed activations, lane by lane.
+fn blocked_row_dot(w: &[u8], rows: usize, cols: usize, r: usize, xp: &[u32]) -> i32 {
+    let lane = |word: u32, hi: bool| (if hi { word >> 16 } else { word }) as u16 as i16 as i32;
+    let at = |c: usize| {
+        w.get(blocked_index(rows, cols, r, c))
+            .map_or(0, |&b| b as i8 as i32)
     };
-    [row(0), row(1)]
+    let mut acc = 0i32;
+    for g in 0..cols / 4 {
+        let e = xp.get(2 * g).copied().unwrap_or(0);
+        let o = xp.get(2 * g + 1).copied().unwrap_or(0);
+        let c = 4 * g;
+        // SMLAD(SXTB16(w), e) then SMLAD(SXTB16(w, ROR 8), o); the running sum wraps as SMLAD's.
+        acc = acc.wrapping_add(at(c) * lane(e, false) + at(c + 2) * lane(e, true));
+        acc = acc.wrapping_add(at(c + 1) * lane(o, false) + at(c + 3) * lane(o, true));
+    }
+    for c in cols / 4 * 4..cols {
+        acc = acc.wrapping_add(at(c) * packed_get(xp, c));
+    }
+    acc
 }
 
 /// [`dot_i8_packed`] in plain Rust, lane by lane as `SXTB16`/`SMLAD` compute it.
@@ -388,263 +456,227 @@ pub mod dsp {
         [e, o]
     }
 
-    /// See [`super::matvec_i8_packed`]: the rows two at a time, one `asm!` block per pair (the
-    /// loop over the pair's columns in assembly: groups of four columns left over after the
-    /// 16-column blocks first, then the blocks), so that a pair costs about a dozen
-    /// instructions besides its multiply-accumulates.
+    /// See [`super::matvec_i8_packed`]: every full block of four rows in one `asm!` block.
+    ///
+    /// Per group of four columns and block of four rows (16 multiply-accumulates): one `LDM`
+    /// of two activation words, two `LDM` of two weight words (rows 0–1, rows 2–3: the blocked
+    /// layout puts them side by side), 8 `SXTB16`, 8 `SMLAD`; four groups per loop iteration
+    /// (`CMP`, `BNE`): 1.22 instructions per MAC. Groups left over from the loop of four (the
+    /// first `groups % 4` of a block; all of them when the weights are not word aligned) run one
+    /// by one first, with `LDR`. The loop over the blocks is in the assembly too (about 25
+    /// instructions per block; its state in a small context on the stack). Columns past the last
+    /// whole group, and a last block of fewer than four rows, run in Rust.
     pub fn matvec_i8_packed(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mut [i32]) {
         let rows = rows.min(acc.len());
-        let groups = (cols / 4).min(xp.len() / 2);
-        // Pairs of rows that `w` holds whole.
-        let pairs = (rows / 2).min(w.len().checked_div(2 * cols).unwrap_or(0));
-        if cols == 0 || pairs == 0 || 4 * groups != cols {
+        let groups = cols / 4;
+        let full = rows / 4;
+        let whole = 4 * groups;
+        let tail = cols - whole;
+        // The kernel needs every whole group's activation words and every full block's bytes.
+        if 2 * groups > xp.len() || w.len() < 4 * full * cols {
             return super::matvec_i8_packed_portable(w, rows, cols, xp, acc);
         }
-        let single4 = 4 * (groups % 4); // bytes per row in the single-group loop
-        let blocks16 = 16 * (groups / 4); // bytes per row in the 16-column loop
-        let mut wp = w.as_ptr();
-        for out in acc.chunks_exact_mut(2).take(pairs) {
-            let (acc0, acc1): (i32, i32);
-            // SAFETY: for pair p (p < pairs, so 2 · cols · (p + 1) ≤ w.len()) `wp` is
-            // w + 2 · cols · p; the block reads bytes [wp, wp + cols) and [wp + cols,
-            // wp + 2 · cols) (single4 + blocks16 = 4 · groups = cols) and words [0, 2 · groups)
-            // of `xp` (2 · groups ≤ xp.len()). `LDR` may be unaligned (Armv7-M allows it;
-            // UNALIGN_TRP is clear at reset); `LDM` reads `xp`, a `u32` slice, hence word
-            // aligned. No memory is written, the stack is not used, and every register written
-            // is an output.
+        if full > 0 {
+            // `LDM` needs word-aligned weights: the exporter aligns every int8 layer's weights
+            // in the file (and the firmware the file), and a block's size 4 · cols keeps the
+            // alignment when cols % 4 == 0. Otherwise every group runs in the `LDR` loop.
+            let aligned = (w.as_ptr() as usize) % 4 == 0 && tail == 0;
+            let (single16, quads64) = if aligned {
+                (16 * (groups % 4), 64 * (groups / 4))
+            } else {
+                (16 * groups, 0)
+            };
+            // The context: activations, output pointer, blocks left, loop lengths, tail bytes.
+            let mut ctx: [usize; 6] = [
+                xp.as_ptr() as usize,
+                acc.as_mut_ptr() as usize,
+                full,
+                single16,
+                quads64,
+                4 * tail,
+            ];
+            // SAFETY: for each block `blk < full` (4 · full · cols ≤ w.len(), checked above) the
+            // assembly reads bytes [4 · blk · cols, 4 · blk · cols + 16 · groups) of `w` (then
+            // skips the 4 · tail bytes of the block's tail columns, so that the next block starts
+            // at 4 · (blk + 1) · cols) — by `LDR` (unaligned allowed) in the one-group loop and
+            // by `LDM` in the four-group loop, entered only when `w` and the block size are word
+            // aligned — and words [0, 2 · groups) of `xp` (2 · groups ≤ xp.len(), checked above;
+            // a `u32` slice, hence aligned), and writes the block's four sums to
+            // acc[4 · blk .. 4 · blk + 4] (4 · full ≤ rows ≤ acc.len()), through the context
+            // `ctx`, which it reads and updates (output pointer, blocks left). It pushes one word
+            // (the context pointer) and pops it before the end. Every register written is an
+            // output.
             unsafe {
                 asm!(
-                    "movs {acc0}, #0",
-                    "movs {acc1}, #0",
-                    "cmp {wp}, {end}",
-                    "beq 3f",
+                    "push {{{ctx}}}",
                     "2:",
-                    "ldm {xp}!, {{r2, r3}}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r2, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r3, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r2, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r3, {acc0}",
+                    // A block: the context, zero accumulators.
+                    "ldr {t}, [sp]",
+                    "ldr {xp}, [{t}]",
+                    "ldr {end}, [{t}, #12]",
+                    "add {end}, {end}, {wp}",
+                    "ldr r4, [{t}, #16]",
+                    "movs r8, #0",
+                    "movs r9, #0",
+                    "movs r10, #0",
+                    "movs r11, #0",
                     "cmp {wp}, {end}",
-                    "bne 2b",
+                    "beq 4f",
                     "3:",
+                    // One group at a time (weights by LDR, which may be unaligned).
+                    "ldm {xp}!, {{r2, r3}}",
+                    "ldr r5, [{wp}], #4",
+                    "sxtb16 {t}, r5",
+                    "smlad r8, {t}, r2, r8",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r8, r5, r3, r8",
+                    "ldr r5, [{wp}], #4",
+                    "sxtb16 {t}, r5",
+                    "smlad r9, {t}, r2, r9",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r9, r5, r3, r9",
+                    "ldr r5, [{wp}], #4",
+                    "sxtb16 {t}, r5",
+                    "smlad r10, {t}, r2, r10",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r10, r5, r3, r10",
+                    "ldr r5, [{wp}], #4",
+                    "sxtb16 {t}, r5",
+                    "smlad r11, {t}, r2, r11",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r11, r5, r3, r11",
+                    "cmp {wp}, {end}",
+                    "bne 3b",
+                    "4:",
                     "add {end}, {end}, r4",
                     "cmp {wp}, {end}",
-                    "beq 5f",
-                    "4:",
-                    "ldm {xp}!, {{r2, r3, r4, r5}}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r2, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r3, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r2, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r3, {acc0}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r4, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r5, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r4, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r5, {acc0}",
-                    "ldm {xp}!, {{r2, r3, r4, r5}}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r2, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r3, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r2, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r3, {acc0}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r4, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r5, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r4, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r5, {acc0}",
-                    "cmp {wp}, {end}",
-                    "bne 4b",
+                    "beq 6f",
                     "5:",
-                    wp = inout(reg) wp,
-                    xp = inout(reg) xp.as_ptr() => _,
-                    st = in(reg) cols,
-                    end = inout(reg) wp.wrapping_add(single4) => _,
-                    acc0 = out(reg) acc0,
-                    acc1 = out(reg) acc1,
-                    a = out(reg) _,
-                    b = out(reg) _,
-                    out("r2") _,
-                    out("r3") _,
-                    inout("r4") blocks16 => _,
-                    out("r5") _,
-                    options(pure, readonly, nostack),
-                );
-            }
-            out[0] = acc0;
-            out[1] = acc1;
-            // `wp` stopped at the end of the pair's first row: skip its second row.
-            wp = wp.wrapping_add(cols);
-        }
-        if rows % 2 == 1 || pairs < rows / 2 {
-            for r in 2 * pairs..rows {
-                let row = w.get(r * cols..(r + 1) * cols).unwrap_or(&[]);
-                if let Some(a) = acc.get_mut(r) {
-                    *a = super::dot_i8_packed(row, xp);
-                }
-            }
-        }
-    }
-
-    /// See [`super::dot2_i8_packed`]: two consecutive rows, each activation word loaded once.
-    ///
-    /// Per 16 columns of both rows (32 multiply-accumulates): 2 `LDM` (8 activation words), 8
-    /// `LDR` (weights), 16 `SXTB16`, 16 `SMLAD`, `CMP`, `BNE`: 1.375 instructions per MAC, and one
-    /// call per pair of rows. Groups of four columns left over run in a second loop; columns
-    /// beyond the last whole group (when `cols % 4 != 0`) in Rust.
-    #[inline]
-    pub fn dot2_i8_packed(w: &[u8], cols: usize, xp: &[u32]) -> [i32; 2] {
-        // Whole groups of four columns that both rows and `xp` cover.
-        let rows_ok = cols.checked_mul(2).is_some_and(|n| n <= w.len());
-        if !rows_ok {
-            return super::dot2_i8_packed_portable(w, cols, xp);
-        }
-        let groups = (cols / 4).min(xp.len() / 2);
-        let blocks = groups / 4; // 16 columns each
-        let single = groups % 4;
-        let (mut acc0, mut acc1) = (0i32, 0i32);
-        let mut wp = w.as_ptr();
-        let mut xq = xp.as_ptr();
-        if blocks > 0 {
-            let end = wp.wrapping_add(16 * blocks);
-            // SAFETY: reads bytes [0, 16 · blocks) and [cols, cols + 16 · blocks) of `w`
-            // (16 · blocks ≤ 4 · groups ≤ cols and 2 · cols ≤ w.len(), checked above) and words
-            // [0, 8 · blocks) of `xp` (8 · blocks ≤ 2 · groups ≤ xp.len()). `LDR` may be unaligned
-            // (Armv7-M allows it; UNALIGN_TRP is clear at reset); `LDM` reads `xp`, a `u32` slice,
-            // hence word aligned. No memory is written, the stack is not used, and every register
-            // written is an output.
-            unsafe {
-                asm!(
-                    "2:",
-                    "ldm {xp}!, {{r2, r3, r4, r5}}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r2, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r3, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r2, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r3, {acc0}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r4, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r5, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r4, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r5, {acc0}",
-                    "ldm {xp}!, {{r2, r3, r4, r5}}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r2, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r3, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r2, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r3, {acc0}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r4, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r5, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r4, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r5, {acc0}",
+                    // Four groups per iteration, weights by LDM (word aligned).
+                    "ldm {xp}!, {{r2, r3}}",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r8, {t}, r2, r8",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r8, r4, r3, r8",
+                    "sxtb16 {t}, r5",
+                    "smlad r9, {t}, r2, r9",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r9, r5, r3, r9",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r10, {t}, r2, r10",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r10, r4, r3, r10",
+                    "sxtb16 {t}, r5",
+                    "smlad r11, {t}, r2, r11",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r11, r5, r3, r11",
+                    "ldm {xp}!, {{r2, r3}}",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r8, {t}, r2, r8",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r8, r4, r3, r8",
+                    "sxtb16 {t}, r5",
+                    "smlad r9, {t}, r2, r9",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r9, r5, r3, r9",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r10, {t}, r2, r10",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r10, r4, r3, r10",
+                    "sxtb16 {t}, r5",
+                    "smlad r11, {t}, r2, r11",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r11, r5, r3, r11",
+                    "ldm {xp}!, {{r2, r3}}",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r8, {t}, r2, r8",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r8, r4, r3, r8",
+                    "sxtb16 {t}, r5",
+                    "smlad r9, {t}, r2, r9",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r9, r5, r3, r9",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r10, {t}, r2, r10",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r10, r4, r3, r10",
+                    "sxtb16 {t}, r5",
+                    "smlad r11, {t}, r2, r11",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r11, r5, r3, r11",
+                    "ldm {xp}!, {{r2, r3}}",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r8, {t}, r2, r8",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r8, r4, r3, r8",
+                    "sxtb16 {t}, r5",
+                    "smlad r9, {t}, r2, r9",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r9, r5, r3, r9",
+                    "ldm {wp}!, {{r4, r5}}",
+                    "sxtb16 {t}, r4",
+                    "smlad r10, {t}, r2, r10",
+                    "sxtb16 r4, r4, ror #8",
+                    "smlad r10, r4, r3, r10",
+                    "sxtb16 {t}, r5",
+                    "smlad r11, {t}, r2, r11",
+                    "sxtb16 r5, r5, ror #8",
+                    "smlad r11, r5, r3, r11",
                     "cmp {wp}, {end}",
+                    "bne 5b",
+                    "6:",
+                    // Store the four sums, skip the tail columns, next block.
+                    "ldr {t}, [sp]",
+                    "ldr r2, [{t}, #4]",
+                    "stm r2!, {{r8, r9, r10, r11}}",
+                    "str r2, [{t}, #4]",
+                    "ldr r2, [{t}, #20]",
+                    "add {wp}, {wp}, r2",
+                    "ldr r2, [{t}, #8]",
+                    "subs r2, r2, #1",
+                    "str r2, [{t}, #8]",
                     "bne 2b",
-                    wp = inout(reg) wp,
-                    xp = inout(reg) xq,
-                    st = in(reg) cols,
-                    end = in(reg) end,
-                    acc0 = inout(reg) acc0,
-                    acc1 = inout(reg) acc1,
-                    a = out(reg) _,
-                    b = out(reg) _,
+                    "add sp, sp, #4",
+                    wp = inout(reg) w.as_ptr() => _,
+                    ctx = in(reg) ctx.as_mut_ptr(),
+                    xp = out(reg) _,
+                    end = out(reg) _,
+                    t = out(reg) _,
                     out("r2") _,
                     out("r3") _,
                     out("r4") _,
                     out("r5") _,
-                    options(pure, readonly, nostack),
+                    out("r8") _,
+                    out("r9") _,
+                    out("r10") _,
+                    out("r11") _,
                 );
             }
         }
-        if single > 0 {
-            let end = wp.wrapping_add(4 * single);
-            // SAFETY: continues where the loop above stopped: `single` more groups of four bytes
-            // of both rows and two words of `xp`, all within the bounds established above
-            // (4 · groups ≤ cols, 2 · groups ≤ xp.len()); same alignment and register rules.
-            unsafe {
-                asm!(
-                    "2:",
-                    "ldm {xp}!, {{r2, r3}}",
-                    "ldr {b}, [{wp}, {st}]",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc1}, {a}, r2, {acc1}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc1}, {b}, r3, {acc1}",
-                    "ldr {b}, [{wp}], #4",
-                    "sxtb16 {a}, {b}",
-                    "smlad {acc0}, {a}, r2, {acc0}",
-                    "sxtb16 {b}, {b}, ror #8",
-                    "smlad {acc0}, {b}, r3, {acc0}",
-                    "cmp {wp}, {end}",
-                    "bne 2b",
-                    wp = inout(reg) wp => _,
-                    xp = inout(reg) xq => _,
-                    st = in(reg) cols,
-                    end = in(reg) end,
-                    acc0 = inout(reg) acc0,
-                    acc1 = inout(reg) acc1,
-                    a = out(reg) _,
-                    b = out(reg) _,
-                    out("r2") _,
-                    out("r3") _,
-                    options(pure, readonly, nostack),
-                );
+        if tail > 0 {
+            // Columns past the last whole group: `tail` bytes per row after a block's groups.
+            for (blk, out) in acc.chunks_exact_mut(4).take(full).enumerate() {
+                let at = 4 * blk * cols + 4 * whole;
+                for (i, a) in out.iter_mut().enumerate() {
+                    for j in 0..tail {
+                        let wv = w.get(at + i * tail + j).map_or(0, |&b| b as i8 as i32);
+                        *a = a.wrapping_add(wv * packed_get(xp, whole + j));
+                    }
+                }
             }
         }
-        // Columns past the last whole group (none when cols is a multiple of 4).
-        for k in 4 * groups..cols {
-            let x = packed_get(xp, k);
-            let (a, b) = (w.get(k).copied(), w.get(cols + k).copied());
-            acc0 = acc0.wrapping_add(a.map_or(0, |v| v as i8 as i32) * x);
-            acc1 = acc1.wrapping_add(b.map_or(0, |v| v as i8 as i32) * x);
+        for r in 4 * full..rows {
+            if let Some(o) = acc.get_mut(r) {
+                *o = super::blocked_row_dot(w, rows, cols, r, xp);
+            }
         }
-        [acc0, acc1]
     }
 
     /// See [`super::dot_i8_packed`].
@@ -799,18 +831,58 @@ mod tests {
         }
 
         #[test]
-        fn row_blocked_dot_matches_two_rows(
-            (w, x) in (0usize..=crate::nn::MAX_WIDTH).prop_flat_map(|n| (
-                proptest::collection::vec(proptest::num::u8::ANY.prop_filter("-128", |b| *b != 0x80), 2 * n),
-                proptest::collection::vec(-127i8..=127, n),
-            ))
+        fn blocked_matvec_matches_the_rows(
+            (rows, cols, seed) in (0usize..=13, 0usize..=41, proptest::num::u64::ANY)
         ) {
-            let n = x.len();
+            let mut x = seed | 1;
+            let mut next = move || { x ^= x << 13; x ^= x >> 7; x ^= x << 17; x };
+            let w: std::vec::Vec<u8> = (0..rows * cols).map(|_| ((next() % 255) as i32 - 127) as i8 as u8).collect();
+            let xs: std::vec::Vec<i8> = (0..cols).map(|_| ((next() % 255) as i32 - 127) as i8).collect();
             let mut xp = [0u32; packed_words(crate::nn::MAX_WIDTH)];
-            pack_i8_pairs(&x, &mut xp);
-            let want = [naive(&w[..n], &x), naive(&w[n..], &x)];
-            proptest::prop_assert_eq!(dot2_i8_packed_portable(&w, n, &xp), want);
-            proptest::prop_assert_eq!(dot2_i8_packed(&w, n, &xp[..packed_words(n)]), want);
+            pack_i8_pairs(&xs, &mut xp);
+            let mut blocked = std::vec![0u8; rows * cols];
+            block_rows(&w, rows, cols, &mut blocked).unwrap();
+            let mut back = std::vec![0u8; rows * cols];
+            unblock_rows(&blocked, rows, cols, &mut back).unwrap();
+            proptest::prop_assert_eq!(&back, &w);
+            let want: std::vec::Vec<i32> = (0..rows).map(|r| naive(&w[r * cols..(r + 1) * cols], &xs)).collect();
+            let mut acc = std::vec![0i32; rows];
+            matvec_i8_packed_portable(&blocked, rows, cols, &xp[..packed_words(cols)], &mut acc);
+            proptest::prop_assert_eq!(&acc, &want);
+            let mut acc = std::vec![0i32; rows];
+            matvec_i8_packed(&blocked, rows, cols, &xp[..packed_words(cols)], &mut acc);
+            proptest::prop_assert_eq!(&acc, &want);
+            let mut row = std::vec![0u8; cols];
+            for r in 0..rows {
+                blocked_row(&blocked, rows, cols, r, &mut row);
+                proptest::prop_assert_eq!(&row[..], &w[r * cols..(r + 1) * cols]);
+            }
+        }
+    }
+
+    #[test]
+    fn blocked_layout_example() {
+        // 5 rows × 6 columns: one block of four rows, then a block of one; one whole group of
+        // four columns and two tail columns per row.
+        let (rows, cols) = (5, 6);
+        let at = |r: usize, c: usize| blocked_index(rows, cols, r, c);
+        assert_eq!(
+            (0..4).map(|c| at(0, c)).collect::<std::vec::Vec<_>>(),
+            [0, 1, 2, 3]
+        );
+        assert_eq!(
+            (0..4).map(|c| at(1, c)).collect::<std::vec::Vec<_>>(),
+            [4, 5, 6, 7]
+        );
+        assert_eq!(at(3, 3), 15);
+        assert_eq!((at(0, 4), at(0, 5), at(1, 4), at(3, 5)), (16, 17, 18, 23));
+        assert_eq!((at(4, 0), at(4, 3), at(4, 4), at(4, 5)), (24, 27, 28, 29));
+        let mut seen = [false; 30];
+        for r in 0..rows {
+            for c in 0..cols {
+                assert!(!seen[at(r, c)], "({r}, {c})");
+                seen[at(r, c)] = true;
+            }
         }
     }
 

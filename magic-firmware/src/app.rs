@@ -16,8 +16,16 @@ use magic_core::nn::{self, Layer, Weights};
 use magic_core::quant;
 use magic_core::{Flags, Inversion};
 
-/// The model file named by `MAGIC_MODEL` at build time (see `build.rs`).
-static MODEL: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/model.magic"));
+/// Word alignment for the embedded model file: the exporter aligns the int8 weights within the
+/// file, so that the `SMLAD` kernel can load them with `LDM`.
+#[repr(C, align(4))]
+struct Aligned<B: ?Sized>(B);
+
+static ALIGNED: &Aligned<[u8]> =
+    &Aligned(*include_bytes!(concat!(env!("OUT_DIR"), "/model.magic")));
+
+/// The model file named by `MAGIC_MODEL` at build time (see `build.rs`), word aligned.
+static MODEL: &[u8] = &ALIGNED.0;
 
 /// The forward models this build links: the Mogi model only (the budgeted firmware), or every
 /// problem kind with the feature `rtm`.
@@ -263,9 +271,9 @@ fn measure_split(
     })
 }
 
-/// Checks the int8 dot-product kernels this build uses (the row-blocked pair kernel and the
-/// single-row one) against the portable dot product on every row of every int8 layer of the
-/// model, with deterministic pseudo-random activations.
+/// Checks the int8 kernel this build uses (the blocked `SMLAD` matrix-vector product) against
+/// the portable dot product on every row of every int8 layer of the model, with deterministic
+/// pseudo-random activations.
 fn self_check(model: &Model<'_>) -> Result<(), &'static str> {
     let mut seed = 0x2545_F491u32;
     for layer in model.encoder.iter().chain(model.decoder.iter()) {
@@ -281,7 +289,13 @@ fn check_layer(layer: &Layer<'_>, seed: &mut u32) -> Result<(), &'static str> {
     let (rows, cols) = (layer.rows as usize, layer.cols as usize);
     let mut x = [0i8; nn::MAX_WIDTH];
     let mut xp = [0u32; quant::packed_words(nn::MAX_WIDTH)];
-    let x = x.get_mut(..cols).ok_or("layer wider than MAX_WIDTH")?;
+    let mut acc = [0i32; nn::MAX_WIDTH];
+    let mut row = [0u8; nn::MAX_WIDTH];
+    let (Some(x), Some(acc), Some(row)) =
+        (x.get_mut(..cols), acc.get_mut(..rows), row.get_mut(..cols))
+    else {
+        return Err("layer wider than MAX_WIDTH");
+    };
     for v in x.iter_mut() {
         *seed ^= *seed << 13;
         *seed ^= *seed >> 17;
@@ -289,24 +303,11 @@ fn check_layer(layer: &Layer<'_>, seed: &mut u32) -> Result<(), &'static str> {
         *v = ((*seed >> 24) as u8 as i8).max(-127);
     }
     quant::pack_i8_pairs(x, &mut xp);
-    let xp = &xp[..quant::packed_words(cols)];
-    let differs = "the DSP int8 dot product differs from the portable one";
-    for r in 0..rows {
-        let row = w
-            .get(r * cols..(r + 1) * cols)
-            .ok_or("layer shorter than rows x cols")?;
-        let portable = quant::dot_i8(row, x);
-        if quant::dot_i8_packed(row, xp) != portable {
-            return Err(differs);
-        }
-        if r % 2 == 0 && r + 1 < rows {
-            let next = w
-                .get((r + 1) * cols..(r + 2) * cols)
-                .ok_or("layer shorter than rows x cols")?;
-            let pair = quant::dot2_i8_packed(&w[r * cols..], cols, xp);
-            if pair != [portable, quant::dot_i8(next, x)] {
-                return Err(differs);
-            }
+    quant::matvec_i8_packed(w, rows, cols, &xp[..quant::packed_words(cols)], acc);
+    for (r, &a) in acc.iter().enumerate() {
+        quant::blocked_row(w, rows, cols, r, row);
+        if a != quant::dot_i8(row, x) {
+            return Err("the DSP int8 kernel differs from the portable dot product");
         }
     }
     Ok(())

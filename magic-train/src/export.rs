@@ -169,6 +169,10 @@ fn i32_bytes(v: &[i32]) -> Vec<u8> {
 }
 
 struct LayerBytes {
+    /// An int8 layer's bytes.
+    int8: bool,
+    /// Alignment padding before the int8 weights (see `OwnedModel::encode`).
+    pad: usize,
     a: Vec<u8>,
     b: Vec<u8>,
     c: Vec<u8>,
@@ -178,9 +182,20 @@ struct LayerBytes {
 
 fn layer_bytes(l: &OwnedLayer) -> LayerBytes {
     match &l.weights {
-        OwnedWeights::F32 { w, b } => LayerBytes { a: f32_bytes(w), b: f32_bytes(b), c: vec![], d: vec![], e: vec![] },
+        OwnedWeights::F32 { w, b } => LayerBytes { int8: false, pad: 0, a: f32_bytes(w), b: f32_bytes(b), c: vec![], d: vec![], e: vec![] },
         OwnedWeights::Int8 { w, bias, w_scale, mult, shift, .. } => LayerBytes {
-            a: w.iter().map(|x| *x as u8).collect(),
+            int8: true,
+            pad: 0,
+            // The model file's blocked layout (magic_core::quant::blocked_index); a weight count
+            // that does not match rows × cols is left row-major for validation to reject.
+            a: {
+                let row_major: Vec<u8> = w.iter().map(|x| *x as u8).collect();
+                let mut blocked = vec![0u8; row_major.len()];
+                match magic_core::quant::block_rows(&row_major, l.rows, l.cols, &mut blocked) {
+                    Ok(()) => blocked,
+                    Err(_) => row_major,
+                }
+            },
             b: i32_bytes(bias),
             c: f32_bytes(w_scale),
             d: i32_bytes(mult),
@@ -193,6 +208,7 @@ fn borrow_layer<'a>(l: &OwnedLayer, b: &'a LayerBytes) -> Layer<'a> {
     let weights = match &l.weights {
         OwnedWeights::F32 { .. } => Weights::F32 { w: LeF32(&b.a), bias: LeF32(&b.b) },
         OwnedWeights::Int8 { in_scale, out_scale, .. } => Weights::Int8 {
+            pad: &[0u8; 3][..b.pad.min(3)],
             w: &b.a,
             bias: LeI32(&b.b),
             w_scale: LeF32(&b.c),
@@ -205,19 +221,53 @@ fn borrow_layer<'a>(l: &OwnedLayer, b: &'a LayerBytes) -> Layer<'a> {
     Layer { rows: l.rows as u16, cols: l.cols as u16, act: l.act, weights }
 }
 
+/// Offsets from the start of `bytes` (an encoded model) of every int8 layer's weights, encoder
+/// first, in file order.
+fn int8_weight_offsets(bytes: &[u8]) -> Result<Vec<usize>> {
+    let m = Model::decode(bytes).map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
+    let start = bytes.as_ptr() as usize;
+    Ok(m.encoder
+        .iter()
+        .chain(m.decoder.iter())
+        .filter_map(|l| match l.weights {
+            Weights::Int8 { w, .. } => Some(w.as_ptr() as usize - start),
+            Weights::F32 { .. } => None,
+        })
+        .collect())
+}
+
 impl OwnedModel {
-    /// Encodes to model-file bytes (validated by decoding them again).
+    /// Encodes to model-file bytes (validated by decoding them again). Every int8 layer's
+    /// weights start at a multiple of four bytes from the start of the file (the padding before
+    /// them is chosen after a first encoding), so that the board's kernel can load them by words.
     pub fn encode(&self) -> Result<Vec<u8>> {
-        let enc_b: Vec<LayerBytes> = self.encoder.iter().map(layer_bytes).collect();
-        let dec_b: Vec<LayerBytes> = self.decoder.iter().map(layer_bytes).collect();
+        let mut enc_b: Vec<LayerBytes> = self.encoder.iter().map(layer_bytes).collect();
+        let mut dec_b: Vec<LayerBytes> = self.decoder.iter().map(layer_bytes).collect();
+        let first = self.encode_bytes(&enc_b, &dec_b)?;
+        let offsets = int8_weight_offsets(&first)?;
+        // A padding's length prefix is one byte whatever its length (0–3): each padding shifts
+        // only what follows it, by its length.
+        let mut shift = 0;
+        for (b, off) in enc_b.iter_mut().chain(dec_b.iter_mut()).filter(|b| b.int8).zip(&offsets) {
+            b.pad = (4 - (off + shift) % 4) % 4;
+            shift += b.pad;
+        }
+        let bytes = self.encode_bytes(&enc_b, &dec_b)?;
+        if int8_weight_offsets(&bytes)?.iter().any(|o| o % 4 != 0) {
+            anyhow::bail!("internal error: int8 weights not aligned in the encoded model");
+        }
+        Ok(bytes)
+    }
+
+    fn encode_bytes(&self, enc_b: &[LayerBytes], dec_b: &[LayerBytes]) -> Result<Vec<u8>> {
         let mean = f32_bytes(&self.mean);
         let scale = f32_bytes(&self.scale);
         let mut encoder = heapless::Vec::new();
-        for (l, b) in self.encoder.iter().zip(&enc_b) {
+        for (l, b) in self.encoder.iter().zip(enc_b) {
             encoder.push(borrow_layer(l, b)).map_err(|_| anyhow::anyhow!("too many encoder layers"))?;
         }
         let mut decoder = heapless::Vec::new();
-        for (l, b) in self.decoder.iter().zip(&dec_b) {
+        for (l, b) in self.decoder.iter().zip(dec_b) {
             decoder.push(borrow_layer(l, b)).map_err(|_| anyhow::anyhow!("too many decoder layers"))?;
         }
         let mut bounds = heapless::Vec::new();
@@ -240,7 +290,7 @@ impl OwnedModel {
             decoder,
             residual_threshold: self.residual_threshold,
         };
-        let mut buf = vec![0u8; 64 * 1024 + crate::data::rtm_tables::problem_bytes(&self.problem) + 8 * mean.len() + eff_b.iter().map(Vec::len).sum::<usize>() + enc_b.iter().chain(&dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
+        let mut buf = vec![0u8; 64 * 1024 + crate::data::rtm_tables::problem_bytes(&self.problem) + 8 * mean.len() + eff_b.iter().map(Vec::len).sum::<usize>() + enc_b.iter().chain(dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
         let n = model.encode(&mut buf).map_err(|e| anyhow::anyhow!("encoding the model: {e}"))?;
         buf.truncate(n);
         Model::decode(&buf).map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
@@ -252,8 +302,15 @@ impl OwnedModel {
         let own = |l: &Layer<'_>| {
             let weights = match l.weights {
                 Weights::F32 { w, bias } => OwnedWeights::F32 { w: w.iter().collect(), b: bias.iter().collect() },
-                Weights::Int8 { w, bias, w_scale, mult, shift, in_scale, out_scale } => OwnedWeights::Int8 {
-                    w: w.iter().map(|x| *x as i8).collect(),
+                Weights::Int8 { w, bias, w_scale, mult, shift, in_scale, out_scale, .. } => OwnedWeights::Int8 {
+                    w: {
+                        let (r, c) = (l.rows as usize, l.cols as usize);
+                        let mut row_major = vec![0u8; w.len()];
+                        if magic_core::quant::unblock_rows(w, r, c, &mut row_major).is_err() {
+                            row_major.copy_from_slice(w);
+                        }
+                        row_major.iter().map(|x| *x as i8).collect()
+                    },
                     bias: (0..bias.len()).map(|i| bias.get(i)).collect(),
                     w_scale: w_scale.iter().collect(),
                     mult: (0..mult.len()).map(|i| mult.get(i)).collect(),

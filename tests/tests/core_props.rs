@@ -277,6 +277,7 @@ impl RawLayer {
         let b = &self.bufs;
         let weights = if self.int8 {
             Weights::Int8 {
+                pad: &[],
                 w: &b[0],
                 bias: LeI32(&b[1]),
                 w_scale: LeF32(&b[2]),
