@@ -279,21 +279,61 @@ impl<'a> Model<'a> {
     /// [`Model::decode`] for a build that links only the forward models of `P` (see [`Problems`]):
     /// a model of another kind is [`Error::WrongProblem`].
     pub fn decode_for<P: Problems>(bytes: &'a [u8]) -> Result<Model<'a>, Error> {
+        let mut model = Model::empty();
+        model.decode_in_place::<P>(bytes)?;
+        Ok(model)
+    }
+
+    /// A model with no layers, no stations and empty arrays (not valid): the starting point of
+    /// [`Model::decode_in_place`].
+    pub const fn empty() -> Model<'a> {
+        Model {
+            variant: Variant::A,
+            problem: Problem::Mogi {
+                stations: Stations(&[]),
+                names: Names(""),
+            },
+            obs_mean: LeF32(&[]),
+            obs_scale: LeF32(&[]),
+            bounds: heapless::Vec::new(),
+            encoder: heapless::Vec::new(),
+            decoder: heapless::Vec::new(),
+            residual_threshold: 0.0,
+            effects: heapless::Vec::new(),
+        }
+    }
+
+    /// [`Model::decode_for`] into `self` (e.g. a static on a microcontroller): the fields are
+    /// decoded one by one and the layers, bounds and effects one element at a time straight into
+    /// place, so that decoding needs a few hundred bytes of stack instead of several copies of the
+    /// whole [`Model`]. The format is exactly the derived (postcard) one, which host tests check.
+    /// On error `self` holds no valid model.
+    pub fn decode_in_place<P: Problems>(&mut self, bytes: &'a [u8]) -> Result<(), Error> {
+        let body = Self::checked_body(bytes)?;
+        self.decode_body(body).map_err(|_| Error::Decode)?;
+        self.validate_for::<P>()
+    }
+
+    /// The postcard body of a model file after checking its magic, version, length and CRC.
+    fn checked_body(bytes: &'a [u8]) -> Result<&'a [u8], Error> {
         let n = bytes.len().min(4);
-        if bytes[..n] != MAGIC[..n] {
+        if bytes.get(..n) != MAGIC.get(..n) {
             return Err(Error::BadMagic);
         }
+        let Some(&[_, _, _, _, v0, v1, l0, l1, l2, l3]) = bytes.first_chunk::<HEADER>() else {
+            return Err(Error::Truncated);
+        };
         if bytes.len() < HEADER + 4 {
             return Err(Error::Truncated);
         }
-        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+        let version = u16::from_le_bytes([v0, v1]);
         if version != VERSION {
             return Err(Error::UnsupportedVersion {
                 found: version,
                 supported: VERSION,
             });
         }
-        let body_len = u32::from_le_bytes([bytes[6], bytes[7], bytes[8], bytes[9]]) as usize;
+        let body_len = u32::from_le_bytes([l0, l1, l2, l3]) as usize;
         let end = HEADER.checked_add(body_len).ok_or(Error::Truncated)?;
         let total = end.checked_add(4).ok_or(Error::Truncated)?;
         if bytes.len() < total {
@@ -302,19 +342,36 @@ impl<'a> Model<'a> {
         if bytes.len() > total {
             return Err(Error::InvalidModel("trailing bytes after the CRC"));
         }
-        let stored =
-            u32::from_le_bytes([bytes[end], bytes[end + 1], bytes[end + 2], bytes[end + 3]]);
-        let computed = CRC.checksum(&bytes[..end]);
+        let (Some(content), Some(&[c0, c1, c2, c3])) = (bytes.get(..end), bytes.get(end..total))
+        else {
+            return Err(Error::Truncated);
+        };
+        let stored = u32::from_le_bytes([c0, c1, c2, c3]);
+        let computed = CRC.checksum(content);
         if stored != computed {
             return Err(Error::CrcMismatch { stored, computed });
         }
-        let (model, rest): (Model<'a>, _) =
-            postcard::take_from_bytes(&bytes[HEADER..end]).map_err(|_| Error::Decode)?;
-        if !rest.is_empty() {
-            return Err(Error::Decode);
+        content.get(HEADER..).ok_or(Error::Truncated)
+    }
+
+    /// Decodes the fields of the body in the order of the struct (postcard's derived format:
+    /// fields in order, sequences as a varint length then the elements).
+    fn decode_body(&mut self, body: &'a [u8]) -> Result<(), postcard::Error> {
+        use serde::Deserialize;
+        let mut de = postcard::Deserializer::from_bytes(body);
+        self.variant = Variant::deserialize(&mut de)?;
+        self.problem = Problem::deserialize(&mut de)?;
+        self.obs_mean = LeF32::deserialize(&mut de)?;
+        self.obs_scale = LeF32::deserialize(&mut de)?;
+        decode_seq(&mut de, &mut self.bounds)?;
+        decode_seq(&mut de, &mut self.encoder)?;
+        decode_seq(&mut de, &mut self.decoder)?;
+        self.residual_threshold = f32::deserialize(&mut de)?;
+        decode_seq(&mut de, &mut self.effects)?;
+        if !de.finalize()?.is_empty() {
+            return Err(postcard::Error::DeserializeBadEncoding);
         }
-        model.validate_for::<P>()?;
-        Ok(model)
+        Ok(())
     }
 
     /// Checks every size and value against the compiled limits and against each other.
@@ -535,6 +592,21 @@ impl<'a> Model<'a> {
     }
 }
 
+/// Decodes a postcard sequence (varint length, then the elements) into `out`, element by element.
+fn decode_seq<'de, T: Deserialize<'de>, const N: usize>(
+    de: &mut postcard::Deserializer<'de, postcard::de_flavors::Slice<'de>>,
+    out: &mut heapless::Vec<T, N>,
+) -> Result<(), postcard::Error> {
+    // A sequence's length is a varint, the encoding of a u32 (lengths here are far below 2³²).
+    let n = u32::deserialize(&mut *de)? as usize;
+    out.clear();
+    for _ in 0..n {
+        out.push(T::deserialize(&mut *de)?)
+            .map_err(|_| postcard::Error::DeserializeBadEncoding)?;
+    }
+    Ok(())
+}
+
 fn geometry_of(p: &Problem<'_>) -> Geometry {
     match p {
         Problem::Rtm { geometry, .. } => *geometry,
@@ -554,6 +626,86 @@ mod tests {
         assert_eq!(Names("").len(), 0);
         assert!(Names("").is_empty());
         assert_eq!(Names("A,,B").iter().filter(|s| s.is_empty()).count(), 1);
+    }
+
+    #[test]
+    fn in_place_decoding_matches_the_derived_format() {
+        use crate::nn::{Layer, Weights};
+        let mut st = [0u8; 2 * mogi::STATION_BYTES];
+        let net = [
+            mogi::Station {
+                x_km: 1.0,
+                y_km: -2.0,
+                z_km: 0.1,
+            },
+            mogi::Station {
+                x_km: 3.5,
+                y_km: 0.25,
+                z_km: 0.3,
+            },
+        ];
+        Stations::encode(&net, &mut st).unwrap();
+        let f = |v: &[f32]| -> [u8; 4 * 49] {
+            let mut b = [0u8; 4 * 49];
+            for (c, x) in b.chunks_exact_mut(4).zip(v.iter().cycle()) {
+                c.copy_from_slice(&x.to_le_bytes());
+            }
+            b
+        };
+        let (w, ones, coef) = (f(&[0.1, -0.2, 0.3]), f(&[1.0]), f(&[0.5, 0.25]));
+        let mut bounds = heapless::Vec::new();
+        for b in [[-1.0f32, 1.0], [-1.0, 1.0], [1.0, 9.0], [-2.0, 2.0]] {
+            bounds.push(b).unwrap();
+        }
+        for _ in 0..3 {
+            bounds.push([-5.0, 5.0]).unwrap();
+        }
+        let mut encoder = heapless::Vec::new();
+        encoder
+            .push(Layer {
+                rows: 7,
+                cols: 6,
+                act: crate::nn::Activation::Sigmoid,
+                weights: Weights::F32 {
+                    w: LeF32(&w[..4 * 42]),
+                    bias: LeF32(&w[..4 * 7]),
+                },
+            })
+            .unwrap();
+        let mut effects = heapless::Vec::new();
+        effects.push(Effect::CommonMode).unwrap();
+        effects
+            .push(Effect::Seasonal {
+                coef: LeF32(&coef[..4 * 24]),
+            })
+            .unwrap();
+        let model = Model {
+            variant: Variant::B,
+            problem: Problem::Mogi {
+                stations: Stations(&st),
+                names: Names("AV08,AKGG"),
+            },
+            obs_mean: LeF32(&w[..4 * 6]),
+            obs_scale: LeF32(&ones[..4 * 6]),
+            bounds,
+            encoder,
+            decoder: heapless::Vec::new(),
+            residual_threshold: 2.5,
+            effects,
+        };
+        model.validate().unwrap();
+        let mut buf = [0u8; 1024];
+        let n = model.encode(&mut buf).unwrap();
+        let derived: Model<'_> = postcard::from_bytes(&buf[HEADER..n - 4]).unwrap();
+        let decoded = Model::decode(&buf[..n]).unwrap();
+        assert_eq!(decoded, derived);
+        assert_eq!(decoded, model);
+        // Trailing bytes inside the body and truncated bodies are decoding errors.
+        let mut longer = [0u8; 1024];
+        longer[..n - 4].copy_from_slice(&buf[..n - 4]);
+        let mut m = Model::empty();
+        assert!(m.decode_body(&buf[HEADER..n - 5]).is_err());
+        assert!(m.decode_body(&longer[HEADER..n - 3]).is_err());
     }
 
     #[test]

@@ -190,16 +190,13 @@ fn stdin() -> Option<&'static mut Stdin> {
     cortex_m::singleton!(: Stdin = Stdin::open())
 }
 
-/// Decodes the embedded model into a static (Mogi models only unless the feature `rtm` links the
-/// RTM forward model).
+/// Decodes the embedded model in place into a static (Mogi models only unless the feature `rtm`
+/// links the RTM forward model): no copy of the decoded model on the stack.
 #[inline(never)]
 fn load_model() -> Option<Result<&'static Model<'static>, magic_core::Error>> {
-    let slot: &'static mut Option<Model<'static>> =
-        cortex_m::singleton!(: Option<Model<'static>> = None)?;
-    match Model::decode_for::<Linked>(MODEL) {
-        Ok(m) => Some(Ok(slot.insert(m))),
-        Err(e) => Some(Err(e)),
-    }
+    let slot: &'static mut Model<'static> =
+        cortex_m::singleton!(: Model<'static> = Model::empty())?;
+    Some(slot.decode_in_place::<Linked>(MODEL).map(|()| &*slot))
 }
 
 /// Writes a report line `# key=value` (one non-generic call per figure keeps the report small).
