@@ -24,6 +24,16 @@ pub fn mean_std(v: &[f64]) -> (f64, f64) {
     (m, var.sqrt())
 }
 
+/// `mean ± std` with four decimals, or `-` for no values.
+pub fn mean_std_text(v: &[f64]) -> String {
+    if v.is_empty() {
+        "-".to_string()
+    } else {
+        let (m, s) = mean_std(v);
+        format!("{m:.4} ± {s:.4}")
+    }
+}
+
 /// Trains every variant with every seed; prints a Markdown table and returns the numbers as JSON.
 pub fn table4(data: &GnssData, seeds: &[u64], cfg: &TrainConfig) -> Result<serde_json::Value> {
     let mut rows = Vec::new();
@@ -47,14 +57,7 @@ pub fn table4(data: &GnssData, seeds: &[u64], cfg: &TrainConfig) -> Result<serde
             }
             spe.push(log.seconds_per_epoch());
         }
-        let f = |v: &[f64]| {
-            if v.is_empty() {
-                "-".to_string()
-            } else {
-                let (m, s) = mean_std(v);
-                format!("{m:.4} ± {s:.4}")
-            }
-        };
+        let f = mean_std_text;
         println!(
             "| {variant:?} | {} | {} | {} | {} | {:.4} | {:.3} |",
             f(&per[0]),

@@ -470,14 +470,7 @@ pub fn table3(
                     .map_or(String::new(), |p| format!(", physics-only {p:.4}"))
             );
         }
-        let f = |v: &[f64]| {
-            if v.is_empty() {
-                "-".to_string()
-            } else {
-                let (m, s) = mean_std(v);
-                format!("{m:.4} ± {s:.4}")
-            }
-        };
+        let f = crate::reproduce::mean_std_text;
         println!(
             "| {variant:?} | {} | {} | {} | {} | {:.4} | {:?} | {:.2} |",
             f(&per[0]),
