@@ -86,9 +86,24 @@ impl<'a> Names<'a> {
         let s = self.0;
         s.split(',').filter(move |_| !s.is_empty())
     }
-    /// Number of names.
+    /// Number of names (commas + 1, none for an empty string).
     pub fn len(&self) -> usize {
-        self.iter().count()
+        if self.0.is_empty() {
+            0
+        } else {
+            1 + self.0.bytes().filter(|&b| b == b',').count()
+        }
+    }
+
+    /// Whether every name is 1 to [`MAX_NAME`] bytes long, or there are none (checked on bytes:
+    /// no `str` searching, which keeps the firmware's decoding free of panic paths).
+    pub fn well_formed(&self) -> bool {
+        self.0.is_empty()
+            || self
+                .0
+                .as_bytes()
+                .split(|&b| b == b',')
+                .all(|n| !n.is_empty() && n.len() <= MAX_NAME)
     }
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
@@ -419,7 +434,7 @@ impl<'a> Model<'a> {
                         found: names.len(),
                     });
                 }
-                if names.iter().any(|n| n.is_empty() || n.len() > MAX_NAME) {
+                if !names.well_formed() {
                     return Err(Error::InvalidModel(
                         "station name empty or longer than 8 bytes",
                     ));

@@ -427,8 +427,11 @@ pub fn run_scratch<'s>(
                         found: w.0.len(),
                     });
                 }
-                let src = &f_src[..cols];
-                for (r, (d, row)) in f_dst[..rows]
+                // (Checked slicing: no panic paths; `rows`, `cols` ≤ MAX_WIDTH was checked.)
+                let src = f_src.get(..cols).unwrap_or(&[]);
+                for (r, (d, row)) in f_dst
+                    .get_mut(..rows)
+                    .unwrap_or(&mut [])
                     .iter_mut()
                     .zip(w.0.chunks_exact(4 * cols))
                     .enumerate()
@@ -444,7 +447,7 @@ pub fn run_scratch<'s>(
                     ..
                 }) = next
                 {
-                    quantize_packed(&f_dst[..rows], 1.0 / in_scale, q_dst);
+                    quantize_packed(f_dst.get(..rows).unwrap_or(&[]), 1.0 / in_scale, q_dst);
                     in_int8 = true;
                 }
             }
@@ -482,7 +485,7 @@ pub fn run_scratch<'s>(
                     return Err(e);
                 }
                 if !in_int8 {
-                    quantize_packed(&f_src[..cols], 1.0 / in_scale, q_src);
+                    quantize_packed(f_src.get(..cols).unwrap_or(&[]), 1.0 / in_scale, q_src);
                 }
                 let dest = if next_int8 {
                     Dest::Int8 {
@@ -491,7 +494,7 @@ pub fn run_scratch<'s>(
                     }
                 } else {
                     Dest::F32 {
-                        y: &mut f_dst[..rows],
+                        y: f_dst.get_mut(..rows).unwrap_or(&mut []),
                         act: l.act,
                     }
                 };
@@ -499,7 +502,7 @@ pub fn run_scratch<'s>(
                     w,
                     rows,
                     cols,
-                    &q_src[..packed_words(cols)],
+                    q_src.get(..packed_words(cols)).unwrap_or(&[]),
                     acc,
                     bias.0,
                     mult.0,
@@ -518,7 +521,7 @@ pub fn run_scratch<'s>(
         return Err(Error::InvalidModel("network ends in int8"));
     }
     let [f0, f1] = &s.f;
-    Ok(&(if cur == 0 { f0 } else { f1 })[..width.min(MAX_WIDTH)])
+    Ok((if cur == 0 { f0 } else { f1 }).get(..width).unwrap_or(&[]))
 }
 
 #[cfg(test)]

@@ -45,9 +45,10 @@ impl<'a> LeF32<'a> {
     }
     /// Iterator over the elements.
     pub fn iter(&self) -> impl Iterator<Item = f32> + 'a {
-        self.0
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        self.0.chunks_exact(4).map(|b| match *b {
+            [b0, b1, b2, b3] => f32::from_le_bytes([b0, b1, b2, b3]),
+            _ => 0.0,
+        })
     }
 }
 

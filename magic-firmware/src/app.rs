@@ -69,7 +69,9 @@ pub fn run() -> bool {
         return false;
     }
 
-    let n_obs = model.n_obs();
+    // (A validated model has at most MAX_OBS channels; the clamp spares the slicing below its
+    // panic paths.)
+    let n_obs = model.n_obs().min(MAX_OBS);
     // Models with time-dependent effects read a leading date on every line.
     let with_date = model.needs_time();
     let mut obs = [0f32; MAX_OBS];
@@ -83,6 +85,10 @@ pub fn run() -> bool {
     let mut errors = 0u32;
     while let Some(line) = stdin.next_line() {
         lines += 1;
+        #[cfg(feature = "panic-canary")]
+        if lines == u32::MAX {
+            panic!("canary: a reachable panic for the panic-never check");
+        }
         let Line::Text(text) = line else {
             errors += 1;
             let _ = write!(out, "error,line longer than {LINE_MAX} bytes");
@@ -225,12 +231,13 @@ fn measure_split(
     ws: &mut Workspace,
     clock: &Clock,
 ) -> Option<Split> {
-    let n_obs = obs.len();
-    let n_params = model.n_params();
+    // (Clamped to the array sizes, which a validated model never exceeds: no panic paths.)
+    let n_obs = obs.len().min(MAX_OBS);
+    let n_params = model.n_params().min(MAX_PARAMS);
     let mut z = [0f32; MAX_OBS];
-    for (i, &x) in obs.iter().enumerate() {
+    for (i, (&x, zi)) in obs.iter().zip(z.iter_mut()).enumerate() {
         if !x.is_nan() {
-            z[i] = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
+            *zi = (x - model.obs_mean.get(i)) / model.obs_scale.get(i);
         }
     }
     let mut unit = [0f32; MAX_PARAMS];
@@ -245,9 +252,8 @@ fn measure_split(
         if model.variant == Variant::A {
             continue;
         }
-        for i in 0..n_params {
-            let [lo, hi] = model.bounds[i];
-            params[i] = lo + (hi - lo) * unit[i];
+        for ((p, u), &[lo, hi]) in params.iter_mut().zip(&unit[..n_params]).zip(&model.bounds) {
+            *p = lo + (hi - lo) * u;
         }
         let t = clock.now();
         forward_for::<f32, Linked>(model, &params[..n_params], day, &mut physics[..n_obs]).ok()?;
@@ -300,7 +306,8 @@ fn check_layer(layer: &Layer<'_>, seed: &mut u32) -> Result<(), &'static str> {
         *v = ((*seed >> 24) as u8 as i8).max(-127);
     }
     quant::pack_i8_pairs(x, &mut xp);
-    quant::matvec_i8_packed(w, rows, cols, &xp[..quant::packed_words(cols)], acc);
+    let xp = xp.get(..quant::packed_words(cols)).unwrap_or(&[]);
+    quant::matvec_i8_packed(w, rows, cols, xp, acc);
     for (r, &a) in acc.iter().enumerate() {
         quant::blocked_row(w, rows, cols, r, row);
         if a != quant::dot_i8(row, x) {

@@ -92,14 +92,18 @@ impl Stdin {
                 }
                 continue;
             }
-            let b = self.chunk[self.pos];
+            let Some(&b) = self.chunk.get(self.pos) else {
+                // (`pos < len ≤ chunk.len()`: not reached.)
+                self.pos = self.len;
+                continue;
+            };
             self.pos += 1;
             any = true;
             if b == b'\n' {
                 break;
             }
-            if self.n < LINE_MAX {
-                self.line[self.n] = b;
+            if let Some(slot) = self.line.get_mut(self.n) {
+                *slot = b;
                 self.n += 1;
             } else {
                 self.too_long = true;
@@ -108,7 +112,7 @@ impl Stdin {
         if self.too_long {
             return Some(Line::TooLong);
         }
-        let mut bytes = &self.line[..self.n];
+        let mut bytes = self.line.get(..self.n).unwrap_or(&[]);
         if let [rest @ .., b'\r'] = bytes {
             bytes = rest;
         }
@@ -155,10 +159,14 @@ impl Out {
     /// Ends the current line with `\n` and sends it.
     #[inline(never)]
     pub fn end_line(&mut self) {
-        self.buf[self.n] = b'\n';
-        self.n += 1;
-        if let Some(s) = self.stream.as_mut() {
-            let _ = s.write_all(&self.buf[..self.n]);
+        // `n` stays below the buffer's length (`write_str` keeps a byte for the newline); the
+        // checked accesses cost nothing and keep the code free of panics.
+        if let Some(b) = self.buf.get_mut(self.n) {
+            *b = b'\n';
+            self.n += 1;
+        }
+        if let (Some(s), Some(line)) = (self.stream.as_mut(), self.buf.get(..self.n)) {
+            let _ = s.write_all(line);
         }
         self.n = 0;
     }
@@ -169,10 +177,14 @@ impl fmt::Write for Out {
     #[inline(never)]
     fn write_str(&mut self, s: &str) -> fmt::Result {
         // Keep one byte for the newline.
-        let room = self.buf.len() - 1 - self.n;
+        let room = (self.buf.len() - 1).saturating_sub(self.n);
         let k = s.len().min(room);
-        self.buf[self.n..self.n + k].copy_from_slice(&s.as_bytes()[..k]);
-        self.n += k;
+        if let (Some(dst), Some(src)) =
+            (self.buf.get_mut(self.n..self.n + k), s.as_bytes().get(..k))
+        {
+            dst.copy_from_slice(src);
+            self.n += k;
+        }
         Ok(())
     }
 }

@@ -41,12 +41,32 @@ unsafe fn DefaultHandler(irqn: i16) {
 /// A panic (none is expected: the core returns errors instead). The message and location are not
 /// printed: formatting them keeps every panic site's strings and ~1.6 KB of code in flash; the
 /// host build of the same code path reports them.
+#[cfg(not(feature = "panic-never"))]
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
     let mut out = Out::new();
     let _ = out.write_str("error,panic");
     out.end_line();
     exit(false)
+}
+
+/// With the feature `panic-never`: a panic handler that calls a function defined nowhere. The
+/// optimised, fat-LTO build removes every panic the compiler can prove unreachable; if any call
+/// of the panic machinery remains, the link fails with "undefined symbol:
+/// magic_firmware_panic_is_reachable" and the linker names the functions that reference it.
+/// Such a firmware links only when no panic is reachable (it is never meant to run).
+#[cfg(feature = "panic-never")]
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
+    extern "Rust" {
+        fn magic_firmware_panic_is_reachable() -> !;
+    }
+    // SAFETY: never executed: the symbol is undefined, so a firmware in which this call is
+    // reachable does not link.
+    #[allow(unsafe_code)]
+    unsafe {
+        magic_firmware_panic_is_reachable()
+    }
 }
 
 /// The device-specific part of the vector table: one entry instead of cortex-m-rt's generic 240

@@ -186,7 +186,7 @@ pub fn parse_f32_bytes(b: &[u8]) -> Option<f32> {
             return None;
         }
         let mut e = 0i32;
-        for &c in &body[j..] {
+        for &c in body.get(j..).unwrap_or(&[]) {
             if !c.is_ascii_digit() {
                 return None;
             }
@@ -199,7 +199,10 @@ pub fn parse_f32_bytes(b: &[u8]) -> Option<f32> {
     } else if mant <= 1 << 24 && (-10..=10).contains(&exp10) {
         // Both operands exact in f32: one correctly rounded operation.
         let m = mant as u32 as f32;
-        let p = POW10_F32[exp10.unsigned_abs() as usize];
+        let p = POW10_F32
+            .get(exp10.unsigned_abs() as usize)
+            .copied()
+            .unwrap_or(1.0);
         if exp10 < 0 {
             m / p
         } else {
@@ -207,7 +210,10 @@ pub fn parse_f32_bytes(b: &[u8]) -> Option<f32> {
         }
     } else if mant <= 1 << 53 && (-22..=22).contains(&exp10) {
         let m = mant as f64;
-        let p = POW10_F64[exp10.unsigned_abs() as usize];
+        let p = POW10_F64
+            .get(exp10.unsigned_abs() as usize)
+            .copied()
+            .unwrap_or(1.0);
         (if exp10 < 0 { m / p } else { m * p }) as f32
     } else {
         scale_pow10(mant as f64, exp10) as f32
@@ -235,7 +241,7 @@ fn scale_pow10(mut m: f64, mut e: i32) -> f64 {
 
 /// Writes the result row of an inversion (no newline), as `magic_core::line::write_result`.
 pub fn write_result<R: Real, W: Write>(w: &mut W, inv: &Inversion<R>) -> fmt::Result {
-    for p in &inv.params[..inv.n_params] {
+    for p in inv.params.iter().take(inv.n_params) {
         write_fixed6(w, p.value())?;
         w.write_char(',')?;
     }

@@ -4,6 +4,11 @@
 //! range. A corrupt or truncated model must make the firmware exit non-zero with an
 //! `error,model:` line.
 //!
+//! The firmware is also built with the feature `panic-never` (a panic handler that calls an
+//! undefined function): it must link, which proves that no panic is reachable in it — the whole
+//! firmware, inversion path included — and a build with a deliberately reachable panic
+//! (`panic-canary`) must not.
+//!
 //! Needs `qemu-system-arm` and the Rust target `thumbv7em-none-eabihf`; without them the test
 //! fails with a message saying how to install them, unless `MAGIC_SKIP_QEMU=1`.
 
@@ -11,7 +16,7 @@ use magic_core::model_file::{Model, Variant};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::nn::Activation;
 use magic_train::export::{OwnedLayer, OwnedModel, OwnedWeights};
-use magic_train::qemu::{build_firmware, ensure_toolchain, run_firmware};
+use magic_train::qemu::{build_firmware, build_firmware_with, ensure_toolchain, run_firmware};
 use std::path::PathBuf;
 
 const N_STATIONS: usize = 12;
@@ -318,4 +323,40 @@ fn corrupt_models_are_rejected_by_the_firmware() {
             "{name} model: {first}"
         );
     }
+}
+
+#[test]
+fn no_panic_is_reachable_in_the_firmware() {
+    if !toolchain_ready() {
+        return;
+    }
+    let bytes = model_bytes();
+    let path = temp_dir().join("panic-never.magic");
+    std::fs::write(&path, &bytes).unwrap();
+    // Links only if the optimised firmware contains no call of the panic machinery.
+    let elf = build_firmware_with(&path, &["panic-never"]).expect(
+        "the firmware must link with the panic-never handler (a panic is reachable: the linker \
+         names the undefined symbol magic_firmware_panic_is_reachable)",
+    );
+    // The proof is not vacuous: one reachable panic makes the same build fail to link.
+    assert!(
+        build_firmware_with(&path, &["panic-never", "panic-canary"]).is_err(),
+        "a firmware with a reachable panic linked with the panic-never handler"
+    );
+    // And the panic-free firmware is the firmware: it inverts like the normal build.
+    let lines = input_lines();
+    let input: String = lines.iter().map(|(l, _)| format!("{l}\n")).collect();
+    let run = run_firmware(&elf, &input, TIMEOUT_S).expect("running the firmware");
+    assert!(
+        run.success,
+        "panic-never firmware failed: {:?}",
+        run.results.last()
+    );
+    let normal = run_firmware(
+        &build_firmware(&path).expect("building the firmware"),
+        &input,
+        TIMEOUT_S,
+    )
+    .expect("running the firmware");
+    assert_eq!(run.results, normal.results);
 }
