@@ -1,9 +1,15 @@
 //! Forward-mode dual numbers: a value and `N` exact partial derivatives.
+//!
+//! A dual is built on a plain scalar `T`: `f64` by default, or lanes ([`super::F64x4`]), which
+//! make `Dual<N, F64x4>` four duals computed together, stored as one vector per derivative. A
+//! dual's [`Real::Lanes`] is that lane form, so physics evaluated on lanes of wavelengths carries
+//! its derivatives the same way.
 
-use super::{e1_f64, e1_with_exp, Lanes, Real};
+use super::{Lanes, Real};
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
-/// A forward-mode dual number `v + Σ dᵢ εᵢ` with `N` independent infinitesimals.
+/// A forward-mode dual number `v + Σ dᵢ εᵢ` with `N` independent infinitesimals, on the plain
+/// scalar `T` (`f64`, or lanes of it).
 ///
 /// Evaluating a model on `Dual<N>` inputs seeded with [`Dual::var`] gives the model's value and
 /// its exact Jacobian column by column.
@@ -17,11 +23,11 @@ use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAss
 /// assert_eq!(f.d, [12.0, 9.0]); // ∂f/∂x = 2xy, ∂f/∂y = x²
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Dual<const N: usize> {
+pub struct Dual<const N: usize, T = f64> {
     /// The value.
-    pub v: f64,
+    pub v: T,
     /// The partial derivatives.
-    pub d: [f64; N],
+    pub d: [T; N],
 }
 
 impl<const N: usize> Dual<N> {
@@ -39,25 +45,50 @@ impl<const N: usize> Dual<N> {
         }
         Dual { v, d }
     }
+}
+
+impl<const N: usize, T: Real<Plain = T>> Dual<N, T> {
+    /// The `i`-th independent variable with value `v` on any plain scalar (lanes: every lane).
+    #[inline]
+    pub fn seed(v: T, i: usize) -> Self {
+        let mut d = [T::zero(); N];
+        if let Some(slot) = d.get_mut(i) {
+            *slot = T::one();
+        }
+        Dual { v, d }
+    }
     /// Applies the chain rule for a scalar function with value `f` and derivative `df` at `self.v`.
     #[inline]
-    fn chain(self, f: f64, df: f64) -> Self {
+    fn chain(self, f: T, df: T) -> Self {
         let mut d = self.d;
         for x in d.iter_mut() {
             *x *= df;
         }
         Dual { v: f, d }
     }
+    /// `a` where `pred` holds for `decider`, else `b`, lane by lane when `T` is lanes.
+    #[inline]
+    fn pick(decider: T, pred: impl Fn(f64) -> bool + Copy, a: Self, b: Self) -> Self {
+        let choose = |x: T, y: T| decider.select(pred, || x, || y);
+        let mut d = a.d;
+        for (x, y) in d.iter_mut().zip(b.d) {
+            *x = choose(*x, y);
+        }
+        Dual {
+            v: choose(a.v, b.v),
+            d,
+        }
+    }
 }
 
-impl<const N: usize> PartialOrd for Dual<N> {
+impl<const N: usize, T: PartialOrd> PartialOrd for Dual<N, T> {
     #[inline]
     fn partial_cmp(&self, o: &Self) -> Option<core::cmp::Ordering> {
         self.v.partial_cmp(&o.v)
     }
 }
 
-impl<const N: usize> Add for Dual<N> {
+impl<const N: usize, T: Real<Plain = T>> Add for Dual<N, T> {
     type Output = Self;
     #[inline]
     fn add(mut self, o: Self) -> Self {
@@ -69,7 +100,7 @@ impl<const N: usize> Add for Dual<N> {
     }
 }
 
-impl<const N: usize> Sub for Dual<N> {
+impl<const N: usize, T: Real<Plain = T>> Sub for Dual<N, T> {
     type Output = Self;
     #[inline]
     fn sub(mut self, o: Self) -> Self {
@@ -81,7 +112,7 @@ impl<const N: usize> Sub for Dual<N> {
     }
 }
 
-impl<const N: usize> Mul for Dual<N> {
+impl<const N: usize, T: Real<Plain = T>> Mul for Dual<N, T> {
     type Output = Self;
     #[inline]
     fn mul(mut self, o: Self) -> Self {
@@ -93,11 +124,11 @@ impl<const N: usize> Mul for Dual<N> {
     }
 }
 
-impl<const N: usize> Div for Dual<N> {
+impl<const N: usize, T: Real<Plain = T>> Div for Dual<N, T> {
     type Output = Self;
     #[inline]
     fn div(mut self, o: Self) -> Self {
-        let inv = 1.0 / o.v;
+        let inv = T::one() / o.v;
         let q = self.v * inv;
         for (a, b) in self.d.iter_mut().zip(o.d.iter()) {
             *a = (*a - q * *b) * inv;
@@ -107,7 +138,7 @@ impl<const N: usize> Div for Dual<N> {
     }
 }
 
-impl<const N: usize> Neg for Dual<N> {
+impl<const N: usize, T: Real<Plain = T>> Neg for Dual<N, T> {
     type Output = Self;
     #[inline]
     fn neg(mut self) -> Self {
@@ -121,7 +152,7 @@ impl<const N: usize> Neg for Dual<N> {
 
 macro_rules! assign_op {
     ($tr:ident, $m:ident, $op:tt) => {
-        impl<const N: usize> $tr for Dual<N> {
+        impl<const N: usize, T: Real<Plain = T>> $tr for Dual<N, T> {
             #[inline]
             fn $m(&mut self, o: Self) {
                 *self = *self $op o;
@@ -134,15 +165,19 @@ assign_op!(SubAssign, sub_assign, -);
 assign_op!(MulAssign, mul_assign, *);
 assign_op!(DivAssign, div_assign, /);
 
-impl<const N: usize> Real for Dual<N> {
-    type Plain = f64;
-    type Lanes = Self;
+impl<const N: usize, T> Real for Dual<N, T>
+where
+    T: Real<Plain = T>,
+    T::Lanes: Real<Plain = T::Lanes, Lanes = T::Lanes>,
+{
+    type Plain = T;
+    type Lanes = Dual<N, T::Lanes>;
     #[inline]
     fn c(v: f64) -> Self {
-        Self::constant(v)
+        Self::from_plain(T::c(v))
     }
     #[inline]
-    fn scale(mut self, k: f64) -> Self {
+    fn scale(mut self, k: T) -> Self {
         self.v *= k;
         for a in self.d.iter_mut() {
             *a *= k;
@@ -150,67 +185,97 @@ impl<const N: usize> Real for Dual<N> {
         self
     }
     #[inline]
-    fn from_plain(k: f64) -> Self {
-        Self::constant(k)
+    fn from_plain(k: T) -> Self {
+        Dual {
+            v: k,
+            d: [T::zero(); N],
+        }
+    }
+    #[inline(always)]
+    fn select(
+        self,
+        pred: impl Fn(f64) -> bool,
+        a: impl FnOnce() -> Self,
+        b: impl FnOnce() -> Self,
+    ) -> Self {
+        if self.v.all(&pred) {
+            a()
+        } else if !self.v.any(&pred) {
+            b()
+        } else {
+            Self::pick(self.v, &pred, a(), b())
+        }
+    }
+    #[inline]
+    fn all(self, pred: impl Fn(f64) -> bool) -> bool {
+        self.v.all(pred)
+    }
+    #[inline]
+    fn any(self, pred: impl Fn(f64) -> bool) -> bool {
+        self.v.any(pred)
     }
     #[inline]
     fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
-        let (g, dg) = f(self.v);
+        let g = self.v.apply(&f);
+        let dg = self.v.apply(|x| (f(x).1, 0.0));
         self.chain(g, dg)
     }
     #[inline]
     fn value(self) -> f64 {
-        self.v
+        self.v.value()
     }
     #[inline]
     fn sqrt(self) -> Self {
-        let s = libm::sqrt(self.v);
-        self.chain(s, 0.5 / s)
+        let s = self.v.sqrt();
+        self.chain(s, T::c(0.5) / s)
     }
     #[inline]
     fn exp(self) -> Self {
-        let e = libm::exp(self.v);
+        let e = self.v.exp();
         self.chain(e, e)
     }
     #[inline]
     fn ln(self) -> Self {
-        self.chain(libm::log(self.v), 1.0 / self.v)
+        self.chain(self.v.ln(), T::one() / self.v)
     }
     #[inline]
     fn sin(self) -> Self {
-        self.chain(libm::sin(self.v), libm::cos(self.v))
+        self.chain(self.v.sin(), self.v.cos())
     }
     #[inline]
     fn cos(self) -> Self {
-        self.chain(libm::cos(self.v), -libm::sin(self.v))
+        self.chain(self.v.cos(), -self.v.sin())
     }
     #[inline]
     fn tan(self) -> Self {
-        let t = libm::tan(self.v);
-        self.chain(t, 1.0 + t * t)
+        let t = self.v.tan();
+        self.chain(t, T::one() + t * t)
     }
     #[inline]
     fn acos(self) -> Self {
-        self.chain(libm::acos(self.v), -1.0 / libm::sqrt(1.0 - self.v * self.v))
+        let one = T::one();
+        self.chain(self.v.acos(), -one / (one - self.v * self.v).sqrt())
     }
     #[inline]
     fn asin(self) -> Self {
-        self.chain(libm::asin(self.v), 1.0 / libm::sqrt(1.0 - self.v * self.v))
+        let one = T::one();
+        self.chain(self.v.asin(), one / (one - self.v * self.v).sqrt())
     }
     #[inline]
     fn atan(self) -> Self {
-        self.chain(libm::atan(self.v), 1.0 / (1.0 + self.v * self.v))
+        let one = T::one();
+        self.chain(self.v.atan(), one / (one + self.v * self.v))
     }
     #[inline]
     fn atan2(self, x: Self) -> Self {
         // d atan2(y, x) = (x dy − y dx) / (x² + y²)
         let r2 = self.v * self.v + x.v * x.v;
-        let mut d = [0.0; N];
+        let mut d = [T::zero(); N];
         for (i, slot) in d.iter_mut().enumerate() {
             *slot = (x.v * self.d[i] - self.v * x.d[i]) / r2;
         }
         Dual {
-            v: libm::atan2(self.v, x.v),
+            v: self.v.atan2(x.v),
             d,
         }
     }
@@ -221,30 +286,33 @@ impl<const N: usize> Real for Dual<N> {
     }
     #[inline]
     fn powi(self, n: i32) -> Self {
-        let p = libm::pow(self.v, n as f64);
+        let p = self.v.powi(n);
         let dp = if n == 0 {
-            0.0
+            T::zero()
         } else {
-            n as f64 * libm::pow(self.v, (n - 1) as f64)
+            T::c(n as f64) * self.v.powi(n - 1)
         };
         self.chain(p, dp)
     }
     #[inline]
     fn abs(self) -> Self {
-        if self.v < 0.0 {
-            -self
-        } else {
-            self
-        }
+        self.select(|v| v < 0.0, || -self, || self)
+    }
+    #[inline]
+    fn max(self, o: Self) -> Self {
+        Self::pick(self.v - o.v, |d| d >= 0.0, self, o)
+    }
+    #[inline]
+    fn min(self, o: Self) -> Self {
+        Self::pick(self.v - o.v, |d| d <= 0.0, self, o)
     }
     #[inline]
     fn e1(self) -> Self {
-        self.chain(e1_f64(self.v), -libm::exp(-self.v) / self.v)
+        self.chain(self.v.e1(), -(-self.v).exp() / self.v)
     }
     #[inline]
     fn e1_and_exp(self) -> (Self, Self) {
-        let ex = libm::exp(-self.v);
-        let e1 = e1_with_exp(self.v, ex);
+        let (e1, ex) = self.v.e1_and_exp();
         (self.chain(e1, -ex / self.v), self.chain(ex, -ex))
     }
     #[inline]
@@ -253,26 +321,37 @@ impl<const N: usize> Real for Dual<N> {
     }
 }
 
-/// A dual is its own single lane: its derivative array is already computed element-wise.
-impl<const N: usize> Lanes<Dual<N>> for Dual<N> {
-    const WIDTH: usize = 1;
+/// The lane form of a dual: lane `i` holds the value and every derivative of dual `i`.
+impl<const N: usize, T> Lanes<Dual<N, T>> for Dual<N, T::Lanes>
+where
+    T: Real<Plain = T>,
+    T::Lanes: Real<Plain = T::Lanes, Lanes = T::Lanes>,
+{
+    const WIDTH: usize = <T::Lanes as Lanes<T>>::WIDTH;
     #[inline]
-    fn splat(v: Self) -> Self {
-        v
+    fn splat(x: Dual<N, T>) -> Self {
+        Dual {
+            v: <T::Lanes as Lanes<T>>::splat(x.v),
+            d: x.d.map(<T::Lanes as Lanes<T>>::splat),
+        }
     }
     #[inline]
-    fn lane(self, _i: usize) -> Self {
-        self
+    fn lane(self, i: usize) -> Dual<N, T> {
+        Dual {
+            v: self.v.lane(i),
+            d: self.d.map(|x| x.lane(i)),
+        }
     }
     #[inline]
-    fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> f64 {
-        f(0)
+    fn plain_from_fn(f: impl FnMut(usize) -> f64) -> T::Lanes {
+        <T::Lanes as Lanes<T>>::plain_from_fn(f)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::real::e1_f64;
 
     fn check(f: impl Fn(Dual<1>) -> Dual<1>, g: impl Fn(f64) -> f64, x: f64) {
         let d = f(Dual::var(x, 0));
@@ -306,6 +385,27 @@ mod tests {
             check(|v| v.acos(), |v| v.acos(), x);
             check(|v| v.asin(), |v| v.asin(), x);
         }
+    }
+
+    #[test]
+    fn lanes_of_duals_are_duals_lane_by_lane() {
+        use crate::real::F64x4;
+        let xs = [0.3, 0.7, 1.3, 2.5];
+        let x = Dual::<2, F64x4>::seed(F64x4(xs), 0);
+        let y = Dual::<2, F64x4>::seed(F64x4([2.0, -1.0, 0.5, 3.0]), 1);
+        let f = |x: Dual<2, F64x4>, y: Dual<2, F64x4>| {
+            (x * y).exp() / (x + y.abs()).sqrt() + x.e1_and_exp().0 - x.max(y)
+        };
+        let g = f(x, y);
+        for (i, &xi) in xs.iter().enumerate() {
+            let (x1, y1) = (Dual::<2>::var(xi, 0), Dual::<2>::var(y.v.0[i], 1));
+            let want = (x1 * y1).exp() / (x1 + y1.abs()).sqrt() + x1.e1_and_exp().0 - x1.max(y1);
+            assert_eq!(g.lane(i), want);
+        }
+        // A select whose lanes disagree takes each lane's own branch, derivatives included.
+        let s = x.select(|v| v > 1.0, || x * x, || -x);
+        assert_eq!(s.lane(0), -Dual::<2>::var(0.3, 0));
+        assert_eq!(s.lane(3), Dual::<2>::var(2.5, 0) * Dual::<2>::var(2.5, 0));
     }
 
     #[test]

@@ -189,6 +189,14 @@ macro_rules! lane_real_common {
             k
         }
         #[inline]
+        fn all(self, pred: impl Fn(f64) -> bool) -> bool {
+            self.0.iter().all(|&x| pred(x as f64))
+        }
+        #[inline]
+        fn any(self, pred: impl Fn(f64) -> bool) -> bool {
+            self.0.iter().any(|&x| pred(x as f64))
+        }
+        #[inline]
         fn select(
             self,
             pred: impl Fn(f64) -> bool,

@@ -73,6 +73,16 @@ pub trait Real:
             b()
         }
     }
+    /// Whether `pred` holds for the value (for lanes: for every lane).
+    #[inline]
+    fn all(self, pred: impl Fn(f64) -> bool) -> bool {
+        pred(self.value())
+    }
+    /// Whether `pred` holds for the value (for lanes: for some lane).
+    #[inline]
+    fn any(self, pred: impl Fn(f64) -> bool) -> bool {
+        pred(self.value())
+    }
     /// A scalar function given by its value and derivative, `f(x) = (g(x), g'(x))`, applied to
     /// `self` (lane by lane for lanes; by the chain rule for duals), for functions evaluated in
     /// f64 outside the scalar type (such as PROSPECT's plate transmissivity).

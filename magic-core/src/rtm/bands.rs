@@ -20,12 +20,13 @@
 
 use super::inform::{Geometry, Scene, SpectralRow};
 use super::model::{
-    inputs_from_learned, Fixed, Inform, LearnedJacobian, Tables, N_BANDS, N_INPUTS, N_LEARNED,
+    inputs_from_learned, Fixed, Inform, JacobianLanes, LearnedJacobian, Tables, N_BANDS, N_INPUTS,
+    N_LEARNED,
 };
 use super::prospect::{CoefRow, Coefficients};
 use super::sail::LITAB_DEG;
 use crate::quant::LeF32;
-use crate::real::{Lanes, Real};
+use crate::real::{Dual, Lanes, Real};
 use crate::Error;
 
 /// Values per spectral row (9 PROSPECT-D coefficients, 2 soil spectra, 2 irradiances).
@@ -300,15 +301,18 @@ impl<V: Values> Packed<V> {
         let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
         out.iter_mut().for_each(|o| *o = 0.0);
         jac.iter_mut().for_each(|r| *r = [0.0; N_LEARNED]);
-        for i in 0..self.n_rows {
-            let r = lj.wavelength(&self.row(i));
-            let d = r.d;
-            for b in 0..self.n_bands {
-                let w = self.weight(i, b);
-                if w != 0.0 {
-                    out[b] += w * r.v;
-                    for (j, dj) in jac[b].iter_mut().zip(&d) {
-                        *j += w * dj;
+        let width = <JacobianLanes as Lanes<Dual<N_LEARNED>>>::WIDTH;
+        for i0 in (0..self.n_rows).step_by(width) {
+            let r = lj.wavelengths(&self.rows::<Dual<N_LEARNED>, JacobianLanes>(i0));
+            for (j, i) in (i0..self.n_rows.min(i0 + width)).enumerate() {
+                let rj: Dual<N_LEARNED> = r.lane(j);
+                for b in 0..self.n_bands {
+                    let w = self.weight(i, b);
+                    if w != 0.0 {
+                        out[b] += w * rj.v;
+                        for (jb, dj) in jac[b].iter_mut().zip(&rj.d) {
+                            *jb += w * dj;
+                        }
                     }
                 }
             }
@@ -320,7 +324,6 @@ impl<V: Values> Packed<V> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::real::Dual;
 
     /// Two wavelengths, two bands, uniform beta row: packed f64 and f32 bytes agree, the
     /// Jacobian agrees with Dual<7> forward mode.

@@ -14,7 +14,7 @@ use super::inform::{
 use super::prospect::{leaf_optics, Coefficients, Leaf, LeafOptics};
 use super::sail::{CampbellBins, Lidf, LITAB_DEG};
 use super::sensor::Resampling;
-use crate::real::{Dual, Lanes, Real};
+use crate::real::{Dual, F64x4, Lanes, Real};
 use crate::Error;
 
 /// Number of model inputs.
@@ -435,12 +435,9 @@ impl<'a> Inform<'a> {
         geometry: Geometry,
     ) -> Result<([f64; N_BANDS], [[f64; N_LEARNED]; N_BANDS]), Error> {
         let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
-        let fallback = self.row(0).ok_or(Error::OutOfRange {
-            what: "wavelength index",
-        })?;
         let mut out = [Dual::<N_LEARNED>::constant(0.0); N_BANDS];
-        self.sensor.integrate(
-            |i| lj.wavelength(&self.row(i).unwrap_or(fallback)),
+        self.sensor.integrate_lanes(
+            |ix| lj.wavelengths(&self.rows::<Dual<N_LEARNED>, JacobianLanes>(ix)),
             &mut out,
         )?;
         let mut y = [0.0; N_BANDS];
@@ -453,9 +450,15 @@ impl<'a> Inform<'a> {
     }
 }
 
+/// Four wavelengths' forest reflectance with its 7 derivatives ([`Dual`] on lanes).
+pub(crate) type JacobianLanes = <Dual<N_LEARNED> as Real>::Lanes;
+
+/// A dual in 4 variables on lanes of wavelengths.
+type Lanes4 = <Dual<4> as Real>::Lanes;
+
 /// The exact derivatives of the forest reflectance with respect to the learned variables
-/// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, one wavelength at a time, with the chain rule split so
-/// that each part carries few derivatives:
+/// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, for lanes of wavelengths (four at a time), with the
+/// chain rule split so that each part carries few derivatives:
 ///
 /// * PROSPECT-D on [`Dual<4>`] in (N, cab, cw, cm) gives the leaf reflectance ρ and
 ///   transmittance τ with their derivatives;
@@ -466,9 +469,9 @@ impl<'a> Inform<'a> {
 ///   computed once per spectrum.
 pub(crate) struct LearnedJacobian {
     /// The canopy scene: LAI and LAIu in derivative slots 2 and 3 (0 and 1 are ρ and τ).
-    canopy: Scene<Dual<4>>,
+    canopy: Scene<Lanes4>,
     /// The leaf with N, cab, cw, cm in slots 0 to 3.
-    leaf: Leaf<Dual<4>>,
+    leaf: Leaf<Lanes4>,
     /// `∂F/∂fc` of the crown fractions `[fcd, fcs, fod, fos]`.
     dfractions_dfc: [f64; 4],
 }
@@ -503,7 +506,7 @@ impl LearnedJacobian {
         let [tts, tto, psi] = canopy.inform_angles.map(|a| Dual::constant(a.v));
         let cg = crown_geometry(cd, sd, h, tts, tto, psi);
         let leaf = Leaf {
-            n: Dual::var(z[0], 0),
+            n: Dual::<4>::var(z[0], 0),
             cab: Dual::var(z[1], 1),
             car: Dual::constant(fixed.car),
             anth: Dual::constant(fixed.anth),
@@ -512,30 +515,33 @@ impl LearnedJacobian {
             cm: Dual::var(z[3], 3),
         };
         Ok(LearnedJacobian {
-            canopy,
-            leaf,
+            canopy: canopy.lanes(),
+            leaf: leaf.map(<Lanes4 as Lanes<Dual<4>>>::splat),
             dfractions_dfc: [cg.fcd.d[0], cg.fcs.d[0], cg.fod.d[0], cg.fos.d[0]],
         })
     }
 
-    /// The forest reflectance at one wavelength with its derivatives with respect to `z`.
+    /// The forest reflectance at the wavelengths of `rows` (one per lane) with its derivatives
+    /// with respect to `z`.
     #[inline]
-    pub(crate) fn wavelength(&self, row: &SpectralRow) -> Dual<N_LEARNED> {
-        let lo = leaf_optics(&row.coef, &self.leaf);
+    pub(crate) fn wavelengths(&self, rows: &SpectralRow<F64x4>) -> JacobianLanes {
+        let lo = leaf_optics(&rows.coef, &self.leaf);
         let seeded = LeafOptics {
-            refl: Dual::var(lo.refl.v, 0),
-            trans: Dual::var(lo.trans.v, 1),
+            refl: Dual::seed(lo.refl.v, 0),
+            trans: Dual::seed(lo.trans.v, 1),
         };
-        let t = self.canopy.wavelength_with_leaf(row, seeded);
+        let t = self.canopy.wavelength_with_leaf(rows, seeded);
         let r = t.r_forest;
-        let mut d = [0.0; N_LEARNED];
+        let mut d = [F64x4::c(0.0); N_LEARNED];
         for (k, dk) in d.iter_mut().take(4).enumerate() {
             *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
         }
         d[4] = r.d[2];
         d[5] = r.d[3];
         let basis = crown_fraction_terms(t.r_understory.v, t.r_crown_inf.v, t.t_s.v, t.t_o.v);
-        d[6] = (0..4).map(|i| self.dfractions_dfc[i] * basis[i]).sum();
+        for (db, b) in self.dfractions_dfc.iter().zip(basis) {
+            d[6] += b * F64x4::c(*db);
+        }
         Dual { v: r.v, d }
     }
 }
