@@ -141,7 +141,7 @@ enum Cmd {
         /// Write the ranked families as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
-        /// Write `effects.svg` and `stations.svg` into this folder.
+        /// Write `effects.png`, `residual_pattern.png` and `residual_rms.png` into this folder.
         #[arg(long)]
         plots: Option<PathBuf>,
     },

@@ -1,38 +1,46 @@
 //! Residual analysis: which declared effect does F lack?
 //!
-//! The residual of a day is the observation minus the physics-only reconstruction F(E(x)) (for a
-//! C model too: the correction absorbs bias, the question is what F lacks), computed with the
-//! core's `invert_at` on every day of a split. Residuals are analysed in the data's standardised
-//! units (the paper's metric), after removing each channel's mean over the analysed split; every
-//! fitted constant is converted back to mm for the effect it proposes.
+//! **The residual.** Every day of the data is inverted with the core's `invert_at` (the model as
+//! it will be used): the encoder's variables give the main source's typical position (the median
+//! over the days of largest volume change) and the physics-only error F(E(x)) is reported. The
+//! families are then fitted to what F, linearised around that typical state, cannot produce
+//! whatever its variables: each day's observation less F's time-dependent declared effects, in
+//! the data's standardised units (the paper's metric), projected off the span of F's Jacobian
+//! (the main source's position, depth and volume, and the declared latent effects), each
+//! channel's mean over the analysed split removed. For a C model the same holds: the correction
+//! absorbs bias, the question is what F lacks. Working off the linearisation rather than off
+//! `x − F(E(x))` keeps the analysis independent of how the encoder distorts its variables to
+//! mimic a missing effect (an encoder readily moves the main source towards a second one, or
+//! tilts it to follow a step at an edge station); candidate patterns are projected the same way,
+//! and the constants of fitted effects are de-projected so that adding the effect to F reproduces
+//! the fit (in mm).
 //!
-//! Each effect family is fitted to the residuals in its own form and scored by the share of
-//! residual variance it explains **on data not used in the fit**:
+//! **Scores on held-out data.** Each effect family is fitted to the residuals in its own form and
+//! scored by the share of residual variance it explains on data not used in the fit, its
+//! prediction scaled by one least-squares weight (λ ≥ 0, so a family never scores below zero):
 //!
 //! * latent families, whose variables the encoder would infer every day (`common_mode`,
 //!   `elevation`, `second_source`), predict each station from the other stations (leave one
-//!   station out) on the neighbouring days (±[`NEIGHBOUR_WINDOWS`], the day itself excluded). A
-//!   day-to-day white network jitter is noise, not an effect: only a term that persists from day
-//!   to day and is shared by the network scores;
+//!   station out) on the neighbouring days (±[`NEIGHBOUR_WINDOWS`] days, the day itself excluded,
+//!   best window taken). A day-to-day white network jitter is noise, not an effect: only a term
+//!   that persists from day to day and is shared by the network scores;
 //! * fitted families, constants applied as a function of the date (`seasonal`, `step`, `drift`),
-//!   are fitted on the analysed split and scored on the other splits (how the model with the
-//!   effect would be used). If the data has no other split they are scored in-sample.
+//!   are cross-validated over [`FOLDS`] contiguous blocks of the analysed split (fitted without a
+//!   block, scored on it) and fitted on the whole split and scored on the other splits.
 //!
-//! The **chance level** is the same procedure (fit, selection, scoring) on surrogate residuals
-//! that keep the noise's structure but not the family's: for latent families each station's
-//! series is shifted in time by its own random amount (the network coherence is destroyed, every
-//! station's own spectrum is kept); for fitted families the family's fit is removed from the
-//! analysed split and the rest is phase-randomised (one random phase per frequency shared by all
-//! channels, so spectra and cross-spectra are kept), then fitted and scored on the real held-out
-//! days. The chance level is the [`AnalysisOptions::quantile`] of the surrogate scores, floored at
-//! zero (a fit that loses held-out variance gives no credit).
+//! **Chance.** The same procedure (fit, selections, scoring) runs on surrogate residuals that keep
+//! the noise's structure but not the family's: for latent families the family's daily fit is
+//! removed and each station's series is given a random sign and direction of time (network
+//! coherence destroyed, every station's own series kept whole); for fitted families the family's fit is removed
+//! and the rest phase-randomised (one random phase per frequency shared by all channels, so
+//! spectra and cross-spectra are kept). The **chance level** is the
+//! [`AnalysisOptions::quantile`] of the surrogate scores, floored at zero.
 //!
-//! A family is **significant** when its score exceeds the chance level by more than
-//! `max(MIN_EXCESS, 2 × the surrogates' standard deviation)`. With the chance level at the 95th
-//! percentile, two more standard deviations put the threshold ≈ 3.6 σ above the surrogate mean
-//! (a family-wise false-alarm rate below 0.1 % over the six families for Gaussian scores) and
-//! cover the uncertainty of a percentile estimated from about twenty surrogates; the floor of
-//! half a percent of residual variance keeps negligible effects from being added to the model.
+//! **Significance.** A family is significant when its score exceeds the chance level by more
+//! than its margin: the score must pass the surrogates' mean plus [`SD_MARGIN`] standard
+//! deviations on the square-root scale (where noise scores are close to Gaussian; the raw scores
+//! are χ²-like with a heavy tail), and exceed the chance level by at least [`MIN_EXCESS`] of the
+//! residual variance (negligible effects are not worth a model term).
 
 use crate::data::gnss::GnssData;
 use crate::export::OwnedEffect;
@@ -51,12 +59,14 @@ use std::path::Path;
 pub const NEIGHBOUR_WINDOWS: [usize; 3] = [3, 10, 30];
 /// Smallest excess over chance (share of residual variance) that counts as a discovery.
 pub const MIN_EXCESS: f64 = 0.005;
-/// Surrogate standard deviations the excess over chance must also exceed.
-pub const SD_MARGIN: f64 = 2.0;
+/// Standard deviations above the surrogates' mean (square-root scale) a significant score must
+/// reach. Red noise makes chance coherence between a dozen stations heavy-tailed: on clean
+/// synthetic data scores of 3–4 such deviations occur in a few percent of the families.
+pub const SD_MARGIN: f64 = 4.0;
 /// Half-width (days) of the windows compared by the step scan.
 pub const STEP_SCAN_DAYS: usize = 30;
-/// Half-width (days) of the windows that measure a found step's offset.
-pub const STEP_OFFSET_DAYS: usize = 90;
+/// Fewest days of a split the analysis accepts.
+pub const MIN_DAYS: usize = 360;
 /// Sum over a station's components of its trends' squared robust z-scores needed to enter the
 /// drift family (χ² with 3 degrees of freedom exceeds 20 with probability 2·10⁻⁴).
 pub const DRIFT_Z2: f64 = 20.0;
@@ -117,6 +127,8 @@ pub struct Candidate {
     pub chance_sd: f64,
     /// The margin the excess had to exceed.
     pub margin: f64,
+    /// The surrogate scores the chance level comes from.
+    pub surrogate_scores: Vec<f64>,
 }
 
 impl Candidate {
@@ -148,8 +160,13 @@ pub struct Analysis {
     pub stations: Vec<Station>,
     /// RMS residual per station and component (E, N, U), mm, on the analysed split.
     pub station_rms_mm: Vec<[f64; 3]>,
-    /// The main source's median position (x, y, depth km) over the days it is active.
+    /// The main source's typical position (x, y, depth km): the F linearised around it.
     pub main_source: [f64; 3],
+    /// The dominant residual pattern (first principal component) per station, E N U, as the
+    /// RMS of its daily amplitude in mm.
+    pub pattern_mm: Vec<[f64; 3]>,
+    /// Its share of the residual variance.
+    pub pattern_share: f64,
     /// Seconds the analysis took.
     pub seconds: f64,
 }
@@ -172,6 +189,7 @@ impl Analysis {
                 "params": c.params,
                 "excess": c.excess(),
                 "margin": c.margin,
+                "surrogate_scores": c.surrogate_scores,
             })).collect::<Vec<_>>(),
             "residual_variance": self.residual_variance,
             "residual_mse": self.residual_mse,
@@ -255,12 +273,6 @@ pub struct Residuals {
     pub fit: Block,
     /// The other splits, with the analysed split's channel means removed.
     pub held: Block,
-    /// The analysed split's observations less F's time-dependent effects, projected off F's
-    /// Jacobian (see [`Residuals::project`]) and with each channel's mean removed: what F,
-    /// linearised around the source's typical position, cannot produce whatever its variables.
-    /// The latent families work on these rows; they do not depend on where the encoder puts the
-    /// source (an encoder may mimic a second source by moving the main one).
-    pub latent: Vec<f64>,
     /// Channel means removed (standardised units).
     pub mean: Vec<f64>,
     /// Mean squared residual of the analysed split before removing the means.
@@ -309,11 +321,11 @@ pub fn residuals(model: &Model<'_>, data: &GnssData, split: &str) -> Result<Resi
         bail!("residual analysis needs a model with physics (variant B or C), not A");
     }
     let fit_split = data.split(split)?;
-    if fit_split.len() < 4 * STEP_OFFSET_DAYS {
+    if fit_split.len() < MIN_DAYS {
         bail!(
             "split {split}: {} days are too few for the analysis (at least {})",
             fit_split.len(),
-            4 * STEP_OFFSET_DAYS
+            MIN_DAYS
         );
     }
     let np = model.n_params();
@@ -360,37 +372,34 @@ pub fn residuals(model: &Model<'_>, data: &GnssData, split: &str) -> Result<Resi
             .map(|d| [d.params[0], d.params[1], d.params[2], d.params[3]])
             .collect::<Vec<_>>(),
     );
-    // Observations less F's time-dependent effects (the source and the latent effects at zero).
-    let mut x = Vec::with_capacity(fit_rows.len() * nc);
-    {
-        let mut p = vec![0.0; np];
-        p[..3].copy_from_slice(&main);
-        let mut f = vec![0.0; nc];
-        for (d, t) in fit_rows.iter().zip(&fit_days) {
-            magic_core::invert::forward(model, &p, *t, &mut f)
-                .map_err(|e| anyhow!("day {t}: {e}"))?;
-            x.extend((0..nc).map(|c| (d.obs[c] - f[c]) / data.scale[c]));
-        }
-        demean(&mut x, nc);
-    }
     let tangent = tangent_basis(model, data, main, fit_days[fit_days.len() / 2])?;
-    let block = |days: Vec<f64>, rows: &[Day]| -> Result<Block> {
-        let mut r = Vec::with_capacity(rows.len() * nc);
-        for d in rows {
-            r.extend((0..nc).map(|c| (d.obs[c] - d.physics[c]) / data.scale[c]));
-        }
-        Ok(Block { days, r })
-    };
     let mse = fit_rows
         .iter()
         .flat_map(|d| (0..nc).map(move |c| ((d.obs[c] - d.physics[c]) / data.scale[c]).powi(2)))
         .sum::<f64>()
         / (fit_rows.len() * nc) as f64;
+    // Observations less F's time-dependent effects (F with the source's volume and the latent
+    // effects at zero), standardised and projected off F's Jacobian.
+    let mut p0 = vec![0.0; np];
+    p0[..3].copy_from_slice(&main);
+    let block = |days: Vec<f64>, rows: &[Day]| -> Result<Block> {
+        let r: Vec<Vec<f64>> = rows
+            .par_iter()
+            .zip(days.par_iter())
+            .map(|(d, t)| {
+                let mut f = vec![0.0; nc];
+                magic_core::invert::forward(model, &p0, *t, &mut f)
+                    .map_err(|e| anyhow!("day {t}: {e}"))?;
+                let row: Vec<f64> = (0..nc).map(|c| (d.obs[c] - f[c]) / data.scale[c]).collect();
+                Ok(project_with(&tangent, &row))
+            })
+            .collect::<Result<_>>()?;
+        Ok(Block {
+            days,
+            r: r.concat(),
+        })
+    };
     let mut fit = block(fit_days, &fit_rows)?;
-    let latent = x
-        .par_chunks(nc)
-        .flat_map_iter(|row| project_with(&tangent, row))
-        .collect();
     let mut held = Block::default();
     for name in ["train", "valid", "test"] {
         if name != split {
@@ -425,19 +434,7 @@ pub fn residuals(model: &Model<'_>, data: &GnssData, split: &str) -> Result<Resi
         mse,
         main_source: main,
         tangent,
-        latent,
     })
-}
-
-fn demean(r: &mut [f64], nc: usize) {
-    let t_n = (r.len() / nc).max(1) as f64;
-    let mut m = vec![0.0; nc];
-    for row in r.chunks(nc) {
-        m.iter_mut().zip(row).for_each(|(a, b)| *a += b / t_n);
-    }
-    for row in r.chunks_mut(nc) {
-        row.iter_mut().zip(&m).for_each(|(a, b)| *a -= b);
-    }
 }
 
 fn project_with(basis: &[Vec<f64>], g: &[f64]) -> Vec<f64> {
@@ -870,15 +867,26 @@ fn latent_scores(
     out
 }
 
-/// Each station's channels circularly shifted by its own random lag (≥ 30 days from zero).
-fn station_shift(r: &[f64], nc: usize, ns: usize, rng: &mut StdRng) -> Vec<f64> {
+/// Every station's channels multiplied by a random sign and, at random, reversed in time (not all
+/// stations given the same transform, which would keep the network's coherence).
+fn flip_reverse(r: &[f64], nc: usize, ns: usize, rng: &mut StdRng) -> Vec<f64> {
     let t_n = r.len() / nc;
-    let lo = 30.min(t_n / 4);
-    let lags: Vec<usize> = (0..ns).map(|_| rng.random_range(lo..t_n - lo)).collect();
+    let mut ops: Vec<(f64, bool)> = Vec::new();
+    while ops.is_empty() || ops.iter().all(|o| *o == ops[0]) {
+        ops = (0..ns)
+            .map(|_| {
+                (
+                    if rng.random::<bool>() { 1.0 } else { -1.0 },
+                    rng.random::<bool>(),
+                )
+            })
+            .collect();
+    }
     let mut out = vec![0.0; r.len()];
     for t in 0..t_n {
         for c in 0..nc {
-            out[t * nc + c] = r[((t + lags[c % ns]) % t_n) * nc + c];
+            let (sign, rev) = ops[c % ns];
+            out[t * nc + c] = sign * r[(if rev { t_n - 1 - t } else { t }) * nc + c];
         }
     }
     out
@@ -1082,27 +1090,62 @@ fn fit_seasonal(b: &Block, nc: usize) -> SeasonalFit {
     }
 }
 
+/// The values `v` (standardised) on `chans` whose projection, `P⊥ E v` with `E` the injection of
+/// those channels, equals `d` on them: `(Eᵀ P⊥ E) v = d`. A family fitted channel by channel on
+/// projected residuals sees only `Eᵀ P⊥ E v`; this undoes that so the effect's constants are
+/// those that, added to F, reproduce the fit. Falls back to `d` when the channels are almost
+/// inside F's tangent space (the effect is then mostly absorbed by the encoder anyway).
+fn deproject(tangent: &[Vec<f64>], chans: &[usize], d: &[f64]) -> Vec<f64> {
+    let n = chans.len();
+    let mut m = vec![0.0; n * n];
+    for i in 0..n {
+        m[i * n + i] = 1.0;
+    }
+    for q in tangent {
+        for i in 0..n {
+            for j in 0..n {
+                m[i * n + j] -= q[chans[i]] * q[chans[j]];
+            }
+        }
+    }
+    let mut v = d.to_vec();
+    let norm = |x: &[f64]| x.iter().map(|a| a * a).sum::<f64>().sqrt();
+    if solve(&mut m, &mut v, n) && norm(&v) <= 5.0 * norm(d) {
+        v
+    } else {
+        d.to_vec()
+    }
+}
+
+/// `P⊥ E v`: the projected response on all channels of values `v` on `chans`.
+fn projected_response(tangent: &[Vec<f64>], nc: usize, chans: &[usize], v: &[f64]) -> Vec<f64> {
+    let mut full = vec![0.0; nc];
+    for (c, x) in chans.iter().zip(v) {
+        full[*c] = *x;
+    }
+    project_with(tangent, &full)
+}
+
 struct DriftFit {
     t0: f64,
-    /// Per channel: constant and rate (per year), zero when not selected.
-    coef: Vec<[f64; 2]>,
-    selected: Vec<bool>,
+    /// Selected channels and their rates (standardised units per year, de-projected).
+    chans: Vec<usize>,
+    rates: Vec<f64>,
+    /// Projected response per year on every channel (what the residuals show).
+    response: Vec<f64>,
 }
 
 impl TimeFit for DriftFit {
     fn predict(&self, c: usize, d: f64) -> f64 {
-        if self.selected[c] {
-            self.coef[c][1] * (d - self.t0) / 365.25
-        } else {
-            0.0
-        }
+        self.response[c] * (d - self.t0) / 365.25
     }
     fn active(&self, c: usize) -> bool {
-        self.selected[c]
+        self.response[c] != 0.0
     }
 }
 
-fn fit_drift(b: &Block, nc: usize, ns: usize) -> DriftFit {
+fn fit_drift(b: &Block, scale: &[f64], ns: usize, tangent: &[Vec<f64>]) -> DriftFit {
+    let nc = scale.len();
     let t0 = b.days.iter().sum::<f64>() / b.days.len().max(1) as f64;
     let coef: Vec<[f64; 2]> = fit_basis(&b.r, &b.days, nc, 2, &|d, v: &mut [f64]| {
         v[0] = 1.0;
@@ -1111,13 +1154,15 @@ fn fit_drift(b: &Block, nc: usize, ns: usize) -> DriftFit {
     .into_iter()
     .map(|x| [x[0], x[1]])
     .collect();
-    // A drift at one or a few stations: stations whose rates are outliers among the network's
-    // (robust z per component from the median absolute deviation over stations, summed in
-    // squares over the components).
+    // A drift at one or a few stations: stations whose rates (mm/yr) are outliers among the
+    // network's (robust z per component from the median absolute deviation over stations, summed
+    // in squares over the components).
     let nk = nc / ns;
     let mut z2 = vec![0.0; ns];
     for k in 0..nk {
-        let rates: Vec<f64> = (0..ns).map(|i| coef[k * ns + i][1]).collect();
+        let rates: Vec<f64> = (0..ns)
+            .map(|i| coef[k * ns + i][1] * scale[k * ns + i])
+            .collect();
         let med = median(&mut rates.clone());
         let mad = (1.4826 * median(&mut rates.iter().map(|v| (v - med).abs()).collect::<Vec<_>>()))
             .max(1e-12);
@@ -1125,46 +1170,51 @@ fn fit_drift(b: &Block, nc: usize, ns: usize) -> DriftFit {
             z2[i] += (rates[i] / mad).powi(2);
         }
     }
-    let mut selected = vec![false; nc];
-    for i in 0..ns {
-        if z2[i] > DRIFT_Z2 {
-            for k in 0..nk {
-                selected[k * ns + i] = true;
-            }
-        }
+    let chans: Vec<usize> = (0..ns)
+        .filter(|&i| z2[i] > DRIFT_Z2)
+        .flat_map(|i| (0..nk).map(move |k| k * ns + i))
+        .collect();
+    let d: Vec<f64> = chans.iter().map(|&c| coef[c][1]).collect();
+    let rates = deproject(tangent, &chans, &d);
+    let response = if chans.is_empty() {
+        vec![0.0; nc]
+    } else {
+        projected_response(tangent, nc, &chans, &rates)
+    };
+    DriftFit {
+        t0,
+        chans,
+        rates,
+        response,
     }
-    DriftFit { t0, coef, selected }
 }
 
 struct StepFit {
     station: usize,
     epoch: f64,
-    /// Offsets (standardised units) of the station's channels, E N U.
+    /// Offsets (standardised units) of the station's channels, E N U, de-projected.
     offset: Vec<f64>,
-    /// Constant so the step has zero mean over the fitted block.
-    before: Vec<f64>,
-    ns: usize,
+    /// Projected response of the step on every channel.
+    response: Vec<f64>,
+    /// Share of the fitted rows on or after the epoch (the step has zero mean over them).
+    frac_after: f64,
     stat: f64,
 }
 
 impl TimeFit for StepFit {
     fn predict(&self, c: usize, d: f64) -> f64 {
-        if c % self.ns != self.station {
-            return 0.0;
-        }
-        let k = c / self.ns;
-        self.before[k] + if d >= self.epoch { self.offset[k] } else { 0.0 }
+        self.response[c] * (if d >= self.epoch { 1.0 } else { 0.0 } - self.frac_after)
     }
     fn active(&self, c: usize) -> bool {
-        c % self.ns == self.station
+        self.response[c] != 0.0
     }
 }
 
 /// The step scan: for every station and epoch, the difference of the means of the
 /// [`STEP_SCAN_DAYS`] rows after and before, normalised per channel by its typical (median)
 /// value over epochs; the largest sum over the station's channels wins. The offset is then
-/// measured over [`STEP_OFFSET_DAYS`] on each side.
-fn fit_step(b: &Block, nc: usize, ns: usize) -> StepFit {
+/// the least-squares one of a two-level fit (mean after the epoch minus mean before).
+fn fit_step(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepFit {
     let t_n = b.days.len();
     let w = STEP_SCAN_DAYS.min(t_n / 4).max(1);
     let nk = nc / ns;
@@ -1206,21 +1256,20 @@ fn fit_step(b: &Block, nc: usize, ns: usize) -> StepFit {
         .max_by(|a, b| a.2.total_cmp(&b.2))
         .unwrap_or((0, t_n / 2, 0.0));
     let (station, e, stat) = best;
-    let wo = STEP_OFFSET_DAYS;
-    let offset: Vec<f64> = (0..nk)
-        .map(|k| {
-            mean(k * ns + station, e, (e + wo).min(t_n))
-                - mean(k * ns + station, e.saturating_sub(wo), e)
-        })
+    let chans: Vec<usize> = (0..nk).map(|k| k * ns + station).collect();
+    let d: Vec<f64> = chans
+        .iter()
+        .map(|&c| mean(c, e, t_n) - mean(c, 0, e))
         .collect();
+    let offset = deproject(tangent, &chans, &d);
+    let response = projected_response(tangent, nc, &chans, &offset);
     let frac_after = (t_n - e) as f64 / t_n as f64;
-    let before = offset.iter().map(|o| -o * frac_after).collect();
     StepFit {
         station,
         epoch: b.days[e],
         offset,
-        before,
-        ns,
+        response,
+        frac_after,
         stat,
     }
 }
@@ -1380,29 +1429,49 @@ impl PhaseSurrogates {
         }
     }
 
+    /// One surrogate: a random phase per frequency shared by all channels.
     fn draw(&self, rng: &mut StdRng) -> Vec<f64> {
+        self.draw_grouped(rng, 1, &|_| 0)
+    }
+
+    /// One surrogate with independent random phases for each of `groups` groups of channels
+    /// (`group(c)`): spectra and cross-spectra within a group are kept, groups become independent.
+    fn draw_grouped(
+        &self,
+        rng: &mut StdRng,
+        groups: usize,
+        group: &dyn Fn(usize) -> usize,
+    ) -> Vec<f64> {
         let n = self.n;
-        let rot: Vec<fft::Cx> = (0..n)
-            .map(|k| {
-                if k == 0 || 2 * k == n {
-                    fft::Cx::new(1.0, 0.0)
-                } else {
-                    let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
-                    fft::Cx::new(a.cos(), a.sin())
-                }
+        let rots: Vec<Vec<fft::Cx>> = (0..groups)
+            .map(|_| {
+                let rot: Vec<fft::Cx> = (0..n)
+                    .map(|k| {
+                        if k == 0 || 2 * k == n {
+                            fft::Cx::new(1.0, 0.0)
+                        } else {
+                            let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+                            fft::Cx::new(a.cos(), a.sin())
+                        }
+                    })
+                    .collect();
+                (0..n)
+                    .map(|k| if 2 * k > n { rot[n - k].conj() } else { rot[k] })
+                    .collect()
             })
-            .collect();
-        let rot: Vec<fft::Cx> = (0..n)
-            .map(|k| if 2 * k > n { rot[n - k].conj() } else { rot[k] })
             .collect();
         let mut out = vec![0.0; n * self.nc];
         // Two real channels per complex inverse transform.
         for c0 in (0..self.nc).step_by(2) {
             let c1 = (c0 + 1 < self.nc).then_some(c0 + 1);
+            let (r0, r1) = (&rots[group(c0)], c1.map(|c| &rots[group(c)]));
             let spec: Vec<fft::Cx> = (0..n)
                 .map(|k| {
-                    let a = self.spectra[c0][k].mul(rot[k]);
-                    let b = c1.map_or(fft::Cx::default(), |c| self.spectra[c][k].mul(rot[k]));
+                    let a = self.spectra[c0][k].mul(r0[k]);
+                    let b = match (c1, r1) {
+                        (Some(c), Some(r)) => self.spectra[c][k].mul(r[k]),
+                        _ => fft::Cx::default(),
+                    };
                     fft::Cx::new(a.re - b.im, a.im + b.re)
                 })
                 .collect();
@@ -1470,10 +1539,15 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
     let el_p = elev_pattern(res);
     // The latent families compare projected patterns with projected residuals: the part of the
     // residual F could produce by adjusting its variables is the encoder's business.
-    let fit_perp = res.latent.clone();
+    let fit_perp = fit.r.clone();
     let real = latent_scores(res, &fit_perp, &grid, &patterns, &cm_p, &el_p);
-    // Surrogates: the family's daily fit removed, then every station shifted in time by its own
-    // lag (and projected again), so the family's signal cannot leak into its own chance level.
+    // Surrogates: the family's daily fit removed, then every station's series (its three
+    // components together) multiplied by a random sign and run forwards or backwards in time,
+    // then projected again like the residuals themselves. For noise that is Gaussian, stationary
+    // and independent between stations each such transform is as likely as the data, so the
+    // chance level is exact without any model of the noise's spectrum (randomising phases or
+    // shifting series circularly both break the long-range structure of red noise and make
+    // chance coherence look rarer than it is).
     let removed = |gs: &[Vec<f64>]| -> Vec<f64> {
         let mut r = fit_perp.clone();
         for g in gs {
@@ -1490,7 +1564,8 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
                 .par_iter()
                 .map(|s| {
                     let mut rng = StdRng::seed_from_u64(*s);
-                    score(&res.project_rows(&station_shift(&base, nc, ns, &mut rng))) / total_fit
+                    let r = flip_reverse(&base, nc, ns, &mut rng);
+                    score(&res.project_rows(&r)) / total_fit
                 })
                 .collect()
         };
@@ -1510,8 +1585,8 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
     // Fitted families.
     let seas = fit_seasonal(fit, nc);
     let sc = &seas.coef;
-    let drift = fit_drift(fit, nc, ns);
-    let step = fit_step(fit, nc, ns);
+    let drift = fit_drift(fit, &res.scale, ns, &res.tangent);
+    let step = fit_step(fit, nc, ns, &res.tangent);
     let held_opt = (!std::ptr::eq(held, fit)).then_some(held);
     let time_chance = |f: &dyn TimeFit,
                        refit: &(dyn Fn(&Block) -> Box<dyn TimeFit> + Sync),
@@ -1531,8 +1606,10 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
             .collect()
     };
     let refit_seas = |b: &Block| -> Box<dyn TimeFit> { Box::new(fit_seasonal(b, nc)) };
-    let refit_drift = |b: &Block| -> Box<dyn TimeFit> { Box::new(fit_drift(b, nc, ns)) };
-    let refit_step = |b: &Block| -> Box<dyn TimeFit> { Box::new(fit_step(b, nc, ns)) };
+    let refit_drift =
+        |b: &Block| -> Box<dyn TimeFit> { Box::new(fit_drift(b, &res.scale, ns, &res.tangent)) };
+    let refit_step =
+        |b: &Block| -> Box<dyn TimeFit> { Box::new(fit_step(b, nc, ns, &res.tangent)) };
     let seas_ch = time_chance(&seas, &refit_seas, &seeds[n_sur..2 * n_sur]);
     let drift_ch = time_chance(&drift, &refit_drift, &seeds[2 * n_sur..3 * n_sur]);
     let step_ch = time_chance(&step, &refit_step, &seeds[3 * n_sur..4 * n_sur]);
@@ -1544,7 +1621,11 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
               effect: Option<OwnedEffect>| {
         let chance_level = quantile(&chance, opts.quantile).max(0.0);
         let chance_sd = sd(&chance);
-        let margin = MIN_EXCESS.max(SD_MARGIN * chance_sd);
+        // Threshold on the square-root scale (where the scores of noise are close to Gaussian):
+        // mean + SD_MARGIN standard deviations of the surrogates' root scores.
+        let roots: Vec<f64> = chance.iter().map(|v| v.max(0.0).sqrt()).collect();
+        let t = roots.iter().sum::<f64>() / roots.len().max(1) as f64 + SD_MARGIN * sd(&roots);
+        let margin = MIN_EXCESS.max(t * t - chance_level);
         Candidate {
             family: family.into(),
             variance_explained: score,
@@ -1554,6 +1635,7 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
             effect,
             chance_sd,
             margin,
+            surrogate_scores: chance,
         }
     };
     let mut effects = vec![
@@ -1602,14 +1684,9 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
             drift_params(res, &drift),
             Some(OwnedEffect::Drift {
                 t0_day: drift.t0 as f32,
-                rate: (0..nc)
-                    .map(|c| {
-                        if drift.selected[c] {
-                            (drift.coef[c][1] * res.scale[c]) as f32
-                        } else {
-                            0.0
-                        }
-                    })
+                rate: drift_mm_per_yr(res, &drift)
+                    .iter()
+                    .map(|v| *v as f32)
                     .collect(),
             }),
         ),
@@ -1628,6 +1705,11 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
         ),
     ];
     effects.sort_by(|a, b| b.excess().total_cmp(&a.excess()));
+    let (pc, pattern_share) = dominant_pattern(&fit.r, nc);
+    let pc_amp = (pattern_share * total_fit / t_n as f64).sqrt();
+    let pattern_mm: Vec<[f64; 3]> = (0..ns)
+        .map(|i| core::array::from_fn(|k| pc[k * ns + i] * pc_amp * res.scale[k * ns + i]))
+        .collect();
     let station_rms_mm = (0..ns)
         .map(|i| {
             core::array::from_fn(|k| {
@@ -1652,6 +1734,8 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
         stations: res.stations.clone(),
         station_rms_mm,
         main_source: res.main_source,
+        pattern_mm,
+        pattern_share,
         seconds: start.elapsed().as_secs_f64(),
     })
 }
@@ -1769,19 +1853,22 @@ fn seasonal_params(res: &Residuals, f: &SeasonalFit) -> serde_json::Value {
     })
 }
 
+/// Drift rates (mm/yr) per channel, zero where no drift was selected.
+fn drift_mm_per_yr(res: &Residuals, f: &DriftFit) -> Vec<f64> {
+    let mut out = vec![0.0; res.nc()];
+    for (c, r) in f.chans.iter().zip(&f.rates) {
+        out[*c] = r * res.scale[*c];
+    }
+    out
+}
+
 fn drift_params(res: &Residuals, f: &DriftFit) -> serde_json::Value {
     let ns = res.ns();
+    let rates = drift_mm_per_yr(res, f);
     let mut m = serde_json::Map::new();
     for i in 0..ns {
-        if (0..3).any(|k| f.selected[k * ns + i]) {
-            let r: [f64; 3] = core::array::from_fn(|k| {
-                let c = k * ns + i;
-                if f.selected[c] {
-                    round3(f.coef[c][1] * res.scale[c])
-                } else {
-                    0.0
-                }
-            });
+        if f.chans.iter().any(|c| c % ns == i) {
+            let r: [f64; 3] = core::array::from_fn(|k| round3(rates[k * ns + i]));
             m.insert(res.names[i].clone(), json!(r));
         }
     }
@@ -1803,187 +1890,96 @@ fn round3(v: f64) -> f64 {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Plots (SVG, written directly: no plotting or font library is needed to build or to view).
+// Plots (PNG through `crate::plots`: plotters' bitmap backend with a compiled-in font, so nothing
+// but crates is needed to build or to draw).
 
-/// Writes `effects.svg` (score and chance level per family) and `stations.svg` (residual RMS per
-/// station on the network map, with the main source and the best second-source position).
+/// Writes `effects.png` (each family's held-out score as a bar, its chance level as a tick),
+/// `residual_pattern.png` (the dominant residual pattern on the network: horizontal arrows, the
+/// vertical as colour) and `residual_rms.png` (residual RMS per station, all components).
 pub fn write_plots(a: &Analysis, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    std::fs::write(dir.join("effects.svg"), effects_svg(a))
-        .with_context(|| format!("{}: cannot write", dir.display()))?;
-    std::fs::write(dir.join("stations.svg"), stations_svg(a))
-        .with_context(|| format!("{}: cannot write", dir.display()))?;
+    let labels: Vec<String> = a
+        .effects
+        .iter()
+        .map(|c| {
+            if c.significant {
+                format!("{} *", c.family)
+            } else {
+                c.family.clone()
+            }
+        })
+        .collect();
+    let values: Vec<f64> = a
+        .effects
+        .iter()
+        .map(|c| 100.0 * c.variance_explained)
+        .collect();
+    let chance: Vec<f64> = a.effects.iter().map(|c| 100.0 * c.chance_level).collect();
+    crate::plots::bar_chart(
+        &dir.join("effects.png"),
+        &format!(
+            "Residual variance explained on held-out data, % ({}; tick: chance, *: significant)",
+            a.split
+        ),
+        &labels,
+        &values,
+        &chance,
+    )?;
+    let st: Vec<(String, f64, f64)> = a
+        .names
+        .iter()
+        .zip(&a.stations)
+        .map(|(n, s)| (n.clone(), s.x_km, s.y_km))
+        .collect();
+    crate::plots::station_map(
+        &dir.join("residual_pattern.png"),
+        &format!(
+            "Dominant residual pattern ({:.0} % of the residual variance; arrows E/N, colour U, mm RMS)",
+            100.0 * a.pattern_share
+        ),
+        &st,
+        &a.pattern_mm.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>(),
+        &a.pattern_mm.iter().map(|p| p[2]).collect::<Vec<_>>(),
+    )?;
+    crate::plots::station_map(
+        &dir.join("residual_rms.png"),
+        &format!("Residual RMS per station, mm ({}, all components)", a.split),
+        &st,
+        &[],
+        &a.station_rms_mm
+            .iter()
+            .map(|v| (v.iter().map(|x| x * x).sum::<f64>() / 3.0).sqrt())
+            .collect::<Vec<_>>(),
+    )?;
     Ok(())
 }
 
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-}
-
-fn effects_svg(a: &Analysis) -> String {
-    let (w, row_h, left, right, top) = (760.0, 34.0, 130.0, 40.0, 60.0);
-    let h = top + row_h * a.effects.len() as f64 + 50.0;
-    let vmax = a
-        .effects
-        .iter()
-        .flat_map(|c| [c.variance_explained, c.chance_level + c.margin])
-        .fold(0.01f64, f64::max)
-        * 1.1;
-    let vmin = a
-        .effects
-        .iter()
-        .map(|c| c.variance_explained)
-        .fold(0.0f64, f64::min)
-        * 1.1;
-    let xs = |v: f64| left + (v - vmin) / (vmax - vmin) * (w - left - right);
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"13\">\n\
-         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
-         <text x=\"{left}\" y=\"22\" font-size=\"15\">Residual variance explained on held-out data ({}, {} days)</text>\n\
-         <text x=\"{left}\" y=\"42\" fill=\"#555\">bar: family fit; grey: chance level; dashed: chance + margin (significance threshold)</text>\n",
-        esc(&a.split),
-        a.n_days
-    );
-    let x0 = xs(0.0);
-    for (i, c) in a.effects.iter().enumerate() {
-        let y = top + row_h * i as f64;
-        let (xa, xb) = (
-            xs(c.variance_explained.min(0.0)),
-            xs(c.variance_explained.max(0.0)),
-        );
-        let colour = if c.significant { "#c0392b" } else { "#7f8c8d" };
-        let _ = write!(
-            s,
-            "<text x=\"{}\" y=\"{}\" text-anchor=\"end\">{}</text>\n\
-             <rect x=\"{xa:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"{colour}\"/>\n\
-             <rect x=\"{x0:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"6\" fill=\"#bbb\"/>\n\
-             <line x1=\"{:.1}\" x2=\"{:.1}\" y1=\"{:.1}\" y2=\"{:.1}\" stroke=\"black\" stroke-dasharray=\"4 3\"/>\n\
-             <text x=\"{:.1}\" y=\"{:.1}\" fill=\"#333\">{:.2}%{}</text>\n",
-            left - 8.0,
-            y + 18.0,
-            esc(&c.family),
-            y + 4.0,
-            (xb - xa).max(0.5),
-            row_h - 16.0,
-            y + row_h - 10.0,
-            (xs(c.chance_level) - x0).max(0.5),
-            xs(c.chance_level + c.margin),
-            xs(c.chance_level + c.margin),
-            y + 1.0,
-            y + row_h - 3.0,
-            xb + 6.0,
-            y + 17.0,
-            100.0 * c.variance_explained,
-            if c.significant { " significant" } else { "" }
-        );
-    }
-    let yb = top + row_h * a.effects.len() as f64 + 8.0;
-    let _ = write!(
-        s,
-        "<line x1=\"{x0:.1}\" x2=\"{x0:.1}\" y1=\"{top}\" y2=\"{yb}\" stroke=\"black\"/>\n"
-    );
-    let _ = write!(
-        s,
-        "<line x1=\"{left}\" x2=\"{}\" y1=\"{yb}\" y2=\"{yb}\" stroke=\"black\"/>\n<text x=\"{x0:.1}\" y=\"{}\" text-anchor=\"middle\">0</text>\n<text x=\"{:.1}\" y=\"{}\" text-anchor=\"end\">{:.1}% of residual variance</text>\n</svg>\n",
-        w - right,
-        yb + 16.0,
-        w - right,
-        yb + 16.0,
-        100.0 * vmax
-    );
-    s
-}
-
-fn stations_svg(a: &Analysis) -> String {
-    let (w, h, pad) = (760.0, 560.0, 60.0);
-    let mut pts: Vec<(f64, f64)> = a.stations.iter().map(|s| (s.x_km, s.y_km)).collect();
-    pts.push((a.main_source[0], a.main_source[1]));
-    let ss = a.effects.iter().find(|c| c.family == "second_source");
-    let ss_pos = ss.and_then(|c| {
-        Some((
-            c.params.get("x_km")?.as_f64()?,
-            c.params.get("y_km")?.as_f64()?,
-        ))
-    });
-    if let Some(p) = ss_pos {
-        pts.push(p);
-    }
-    let (x0, x1) = pts
-        .iter()
-        .fold((f64::MAX, f64::MIN), |b, p| (b.0.min(p.0), b.1.max(p.0)));
-    let (y0, y1) = pts
-        .iter()
-        .fold((f64::MAX, f64::MIN), |b, p| (b.0.min(p.1), b.1.max(p.1)));
-    let k = ((w - 2.0 * pad) / (x1 - x0).max(1.0)).min((h - 2.0 * pad - 40.0) / (y1 - y0).max(1.0));
-    let px = |x: f64| pad + (x - x0) * k;
-    let py = |y: f64| h - pad - (y - y0) * k;
-    let rmax = a
-        .station_rms_mm
-        .iter()
-        .flat_map(|v| v.iter().copied())
-        .fold(1e-9f64, f64::max);
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
-         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
-         <text x=\"{pad}\" y=\"22\" font-size=\"15\">Residual RMS per station ({}): circles E (blue), N (green), U (orange), largest {:.2} mm</text>\n",
-        esc(&a.split),
-        rmax
-    );
-    for (i, st) in a.stations.iter().enumerate() {
-        let (cx, cy) = (px(st.x_km), py(st.y_km));
-        for (kk, col) in ["#2c7fb8", "#31a354", "#e6550d"].iter().enumerate() {
-            let r = 4.0 + 22.0 * (a.station_rms_mm[i][kk] / rmax).sqrt();
-            let _ = writeln!(
-                s,
-                "<circle cx=\"{:.1}\" cy=\"{cy:.1}\" r=\"{r:.1}\" fill=\"none\" stroke=\"{col}\" stroke-width=\"2\"/>",
-                cx + (kk as f64 - 1.0) * 3.0
-            );
-        }
-        let _ = writeln!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\">{} ({:.1}/{:.1}/{:.1})</text>",
-            cx + 8.0,
-            cy - 10.0,
-            esc(&a.names[i]),
-            a.station_rms_mm[i][0],
-            a.station_rms_mm[i][1],
-            a.station_rms_mm[i][2]
-        );
-    }
-    let (mx, my) = (px(a.main_source[0]), py(a.main_source[1]));
-    let _ = writeln!(
-        s,
-        "<path d=\"M{:.1},{:.1} l6,10 h-12 z\" fill=\"black\"/><text x=\"{:.1}\" y=\"{:.1}\">main source</text>",
-        mx,
-        my - 6.0,
-        mx + 9.0,
-        my + 4.0
-    );
-    if let (Some(c), Some(p)) = (ss, ss_pos) {
-        let (sx, sy) = (px(p.0), py(p.1));
-        let _ = writeln!(
-            s,
-            "<path d=\"M{:.1},{:.1} l6,10 h-12 z\" fill=\"{}\"/><text x=\"{:.1}\" y=\"{:.1}\">best second source{}</text>",
-            sx,
-            sy - 6.0,
-            if c.significant { "#c0392b" } else { "#999" },
-            sx + 9.0,
-            sy + 4.0,
-            if c.significant {
-                " (significant)"
-            } else {
-                " (not significant)"
+/// The first principal component of the rows (standardised): unit vector and its share of the
+/// total variance (power iteration on the channel covariance).
+fn dominant_pattern(r: &[f64], nc: usize) -> (Vec<f64>, f64) {
+    let mut cov = vec![0.0; nc * nc];
+    for row in r.chunks(nc) {
+        for a in 0..nc {
+            for b in 0..nc {
+                cov[a * nc + b] += row[a] * row[b];
             }
-        );
+        }
     }
-    let _ = writeln!(
-        s,
-        "<text x=\"{pad}\" y=\"{}\" fill=\"#555\">axes: km east / north (equal scale)</text>\n</svg>",
-        h - 15.0
-    );
-    s
+    let total: f64 = (0..nc).map(|c| cov[c * nc + c]).sum();
+    let mut v = vec![1.0 / (nc as f64).sqrt(); nc];
+    let mut lambda = 0.0;
+    for _ in 0..200 {
+        let w: Vec<f64> = (0..nc)
+            .map(|a| (0..nc).map(|b| cov[a * nc + b] * v[b]).sum())
+            .collect();
+        let n = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if n == 0.0 {
+            break;
+        }
+        lambda = n;
+        v = w.iter().map(|x| x / n).collect();
+    }
+    (v, if total > 0.0 { lambda / total } else { 0.0 })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -2232,4 +2228,152 @@ pub fn recovery_table(rows: &[Recovery]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    #[test]
+    fn bluestein_matches_the_naive_dft() {
+        for n in [1usize, 2, 7, 12, 30, 101] {
+            let x: Vec<fft::Cx> = noise(2 * n, n as u64)
+                .chunks(2)
+                .map(|p| fft::Cx::new(p[0], p[1]))
+                .collect();
+            let plan = fft::Plan::new(n);
+            let y = plan.forward(&x);
+            for (k, yk) in y.iter().enumerate() {
+                let (mut re, mut im) = (0.0, 0.0);
+                for (j, xj) in x.iter().enumerate() {
+                    let a = -std::f64::consts::TAU * (j * k) as f64 / n as f64;
+                    re += xj.re * a.cos() - xj.im * a.sin();
+                    im += xj.re * a.sin() + xj.im * a.cos();
+                }
+                assert!(
+                    (yk.re - re).abs() < 1e-9 && (yk.im - im).abs() < 1e-9,
+                    "n {n} k {k}"
+                );
+            }
+            let z = plan.inverse(&y);
+            for (a, b) in z.iter().zip(&x) {
+                assert!((a.re - b.re).abs() < 1e-9 && (a.im - b.im).abs() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn phase_surrogates_keep_spectra_and_cross_spectra() {
+        let (n, nc) = (64, 3);
+        let r = noise(n * nc, 5);
+        let ps = PhaseSurrogates::new(&r, nc);
+        let s = ps.draw(&mut StdRng::seed_from_u64(9));
+        let spec = |v: &[f64], c: usize| {
+            ps.plan.forward(
+                &(0..n)
+                    .map(|t| fft::Cx::new(v[t * nc + c], 0.0))
+                    .collect::<Vec<_>>(),
+            )
+        };
+        for c in 0..nc {
+            let (a, b) = (spec(&r, c), spec(&s, c));
+            for k in 0..n {
+                assert!((a[k].re.hypot(a[k].im) - b[k].re.hypot(b[k].im)).abs() < 1e-9);
+            }
+            assert!(s.iter().all(|v| v.is_finite()));
+        }
+        // Cross-spectrum of channels 0 and 1: same at every frequency.
+        let (a0, a1, b0, b1) = (spec(&r, 0), spec(&r, 1), spec(&s, 0), spec(&s, 1));
+        for k in 0..n {
+            let x = a0[k].mul(a1[k].conj());
+            let y = b0[k].mul(b1[k].conj());
+            assert!((x.re - y.re).abs() < 1e-8 && (x.im - y.im).abs() < 1e-8);
+        }
+        // And the series itself changed.
+        assert!(r.iter().zip(&s).map(|(a, b)| (a - b).abs()).sum::<f64>() > 1.0);
+    }
+
+    #[test]
+    fn leave_one_station_out_matches_a_direct_computation() {
+        let (ns, nc, t_n, w) = (3usize, 9usize, 40usize, 2usize);
+        let r = noise(t_n * nc, 11);
+        let g = noise(nc, 12);
+        let (a, b) = loso_ab(&g, &cross(&r, nc, w), ns);
+        let (mut da, mut db) = (0.0, 0.0);
+        for t in 0..t_n {
+            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
+            let m: Vec<f64> = (0..nc)
+                .map(|c| {
+                    (lo..hi)
+                        .filter(|&u| u != t)
+                        .map(|u| r[u * nc + c])
+                        .sum::<f64>()
+                        / (hi - lo - 1) as f64
+                })
+                .collect();
+            for i in 0..ns {
+                let others: Vec<usize> = (0..nc).filter(|c| c % ns != i).collect();
+                let amp = others.iter().map(|&c| g[c] * m[c]).sum::<f64>()
+                    / others.iter().map(|&c| g[c] * g[c]).sum::<f64>();
+                for c in (0..nc).filter(|c| c % ns == i) {
+                    let p = g[c] * amp;
+                    da += r[t * nc + c] * p;
+                    db += p * p;
+                }
+            }
+        }
+        assert!(
+            (a - da).abs() < 1e-9 * (1.0 + da.abs()) && (b - db).abs() < 1e-9 * (1.0 + db.abs()),
+            "{a} {da} {b} {db}"
+        );
+    }
+
+    #[test]
+    fn deprojection_inverts_the_projection() {
+        let nc = 9;
+        let mut tangent: Vec<Vec<f64>> = Vec::new();
+        for seed in [1, 2] {
+            let mut v = noise(nc, seed);
+            for q in &tangent {
+                let d: f64 = q.iter().zip(&v).map(|(a, b)| a * b).sum();
+                v.iter_mut().zip(q).for_each(|(x, y)| *x -= d * y);
+            }
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            tangent.push(v.iter().map(|x| x / n).collect());
+        }
+        let chans = [0usize, 3, 6];
+        let v = [0.7, -1.2, 2.0];
+        let resp = projected_response(&tangent, nc, &chans, &v);
+        let d: Vec<f64> = chans.iter().map(|&c| resp[c]).collect();
+        let back = deproject(&tangent, &chans, &d);
+        for (a, b) in back.iter().zip(&v) {
+            assert!((a - b).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn step_scan_finds_a_step_in_noise() {
+        let (ns, nc, t_n) = (4usize, 12usize, 600usize);
+        let mut r = noise(t_n * nc, 3);
+        for t in 250..t_n {
+            for k in 0..3 {
+                r[t * nc + k * ns + 2] += [1.5, -1.0, 2.0][k];
+            }
+        }
+        let b = Block {
+            days: (0..t_n).map(|t| 14_000.0 + t as f64).collect(),
+            r,
+        };
+        let f = fit_step(&b, nc, ns, &[]);
+        assert_eq!(f.station, 2);
+        assert_eq!(f.epoch, 14_250.0);
+        for (o, want) in f.offset.iter().zip([1.5, -1.0, 2.0]) {
+            assert!((o - want).abs() < 0.15, "{o} vs {want}");
+        }
+    }
 }
