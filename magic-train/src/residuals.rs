@@ -74,6 +74,10 @@ pub const DRIFT_Z2: f64 = 20.0;
 /// position are not considered: there the residual is the main source's misfit.
 pub const MAIN_SOURCE_EXCLUSION_KM: f64 = 3.0;
 
+/// Squared norm (standardised units per unit of the effect's variable) below which a projected
+/// pattern counts as already produced by F.
+const DECLARED_NORM2: f64 = 1e-12;
+
 /// The families, in report order.
 pub const FAMILIES: [&str; 6] = [
     "common_mode",
@@ -604,6 +608,9 @@ fn loso_ab(g: &[f64], x: &Cross, ns: usize) -> (f64, f64) {
     let gmg: f64 = g.iter().zip(&mg).map(|(a, b)| a * b).sum();
     let gg: f64 = g.iter().map(|v| v * v).sum();
     let (mut sa, mut sb) = (0.0, 0.0);
+    if gg < DECLARED_NORM2 {
+        return (0.0, 0.0);
+    }
     for i in 0..ns {
         let ci: Vec<usize> = (0..nc / ns).map(|k| k * ns + i).collect();
         let own: f64 = ci.iter().map(|&c| g[c] * g[c]).sum();
@@ -1748,8 +1755,14 @@ fn with_window(mut v: serde_json::Value, w: usize) -> serde_json::Value {
 }
 
 /// Daily least-squares amplitude of a pattern (standardised units) on every row.
+///
+/// A pattern already inside F's tangent space (an effect the model declares) projects to
+/// (numerically) nothing: its amplitude is then 0.
 fn daily_amplitude(r: &[f64], nc: usize, g: &[f64]) -> Vec<f64> {
     let gg: f64 = g.iter().map(|v| v * v).sum();
+    if gg < DECLARED_NORM2 {
+        return vec![0.0; r.len() / nc];
+    }
     r.chunks(nc)
         .map(|row| row.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() / gg)
         .collect()
@@ -1782,6 +1795,9 @@ fn elev_params(res: &Residuals, r: &[f64]) -> serde_json::Value {
     let nc = res.nc();
     let g = elev_pattern(res);
     let gg: f64 = g.iter().map(|v| v * v).sum();
+    if gg < DECLARED_NORM2 {
+        return json!({"mm_per_km": 0.0, "z_ref_km": z_ref(res)});
+    }
     let a = daily_amplitude(r, nc, &g);
     let t_n = a.len() as f64;
     let mut var_c = vec![0.0; nc];
