@@ -2,10 +2,10 @@
 //!
 //! A dual is built on a plain scalar `T`: `f64` by default, or lanes ([`super::F64x4`]), which
 //! make `Dual<N, F64x4>` four duals computed together, stored as one vector per derivative. A
-//! dual's [`Real::Lanes`] is that lane form, so physics evaluated on lanes of wavelengths carries
-//! its derivatives the same way.
+//! dual's [`Real::Lanes`] is that lane form ([`DualScalar`]), so physics evaluated on lanes of
+//! wavelengths carries its derivatives the same way.
 
-use super::{Lanes, Real};
+use super::{DualScalar, Lanes, Real};
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 /// A forward-mode dual number `v + Σ dᵢ εᵢ` with `N` independent infinitesimals, on the plain
@@ -165,13 +165,9 @@ assign_op!(SubAssign, sub_assign, -);
 assign_op!(MulAssign, mul_assign, *);
 assign_op!(DivAssign, div_assign, /);
 
-impl<const N: usize, T> Real for Dual<N, T>
-where
-    T: Real<Plain = T>,
-    T::Lanes: Real<Plain = T::Lanes, Lanes = T::Lanes>,
-{
+impl<const N: usize, T: DualScalar> Real for Dual<N, T> {
     type Plain = T;
-    type Lanes = Dual<N, T::Lanes>;
+    type Lanes = Dual<N, T::DualLanes>;
     #[inline]
     fn c(v: f64) -> Self {
         Self::from_plain(T::c(v))
@@ -322,17 +318,13 @@ where
 }
 
 /// The lane form of a dual: lane `i` holds the value and every derivative of dual `i`.
-impl<const N: usize, T> Lanes<Dual<N, T>> for Dual<N, T::Lanes>
-where
-    T: Real<Plain = T>,
-    T::Lanes: Real<Plain = T::Lanes, Lanes = T::Lanes>,
-{
-    const WIDTH: usize = <T::Lanes as Lanes<T>>::WIDTH;
+impl<const N: usize, T: DualScalar> Lanes<Dual<N, T>> for Dual<N, T::DualLanes> {
+    const WIDTH: usize = <T::DualLanes as Lanes<T>>::WIDTH;
     #[inline]
     fn splat(x: Dual<N, T>) -> Self {
         Dual {
-            v: <T::Lanes as Lanes<T>>::splat(x.v),
-            d: x.d.map(<T::Lanes as Lanes<T>>::splat),
+            v: <T::DualLanes as Lanes<T>>::splat(x.v),
+            d: x.d.map(<T::DualLanes as Lanes<T>>::splat),
         }
     }
     #[inline]
@@ -343,8 +335,8 @@ where
         }
     }
     #[inline]
-    fn plain_from_fn(f: impl FnMut(usize) -> f64) -> T::Lanes {
-        <T::Lanes as Lanes<T>>::plain_from_fn(f)
+    fn plain_from_fn(f: impl FnMut(usize) -> f64) -> T::DualLanes {
+        <T::DualLanes as Lanes<T>>::plain_from_fn(f)
     }
 }
 

@@ -7,6 +7,12 @@
 //! `exp` and `ln` are evaluated for all four lanes at once; other functions go lane by lane
 //! through `libm`.
 //!
+//! [`F64x8`] is two `F64x4` halves evaluated side by side: each operation issues two independent
+//! vector instructions, which keeps the processor busy where one batch's long dependency chain
+//! (INFORM per wavelength is a chain of some thousand cycles) would leave it waiting. It is the
+//! lanes of `f64`; duals, whose derivatives already fill the registers, keep four lanes
+//! ([`DualScalar`]).
+//!
 //! Every lane of an `F64x4` result equals, bit for bit, the `f64` result of the same operation
 //! on that lane (same operations in the same order; `exp` and `ln` follow `libm`'s algorithms
 //! step by step). The same holds for `F32x4` and `f32`.
@@ -32,6 +38,29 @@ pub trait Lanes<S: Real>: Real {
     /// Plain lanes holding `f(0), …, f(WIDTH − 1)`: how table columns are loaded, one
     /// wavelength per lane.
     fn plain_from_fn(f: impl FnMut(usize) -> f64) -> Self::Plain;
+}
+
+/// A plain scalar (no derivatives) that [`super::Dual`] numbers are built on, with the lanes
+/// duals on it are evaluated in (at most four: a dual carries a vector per derivative).
+pub trait DualScalar: Real<Plain = Self> {
+    /// The lanes of a dual on this scalar: `Dual<N, DualLanes>` is its [`Real::Lanes`].
+    type DualLanes: DualScalar<DualLanes = Self::DualLanes> + Lanes<Self>;
+}
+
+impl DualScalar for f64 {
+    type DualLanes = F64x4;
+}
+impl DualScalar for f32 {
+    type DualLanes = F32x4;
+}
+impl DualScalar for F64x4 {
+    type DualLanes = F64x4;
+}
+impl DualScalar for F32x4 {
+    type DualLanes = F32x4;
+}
+impl DualScalar for F64x8 {
+    type DualLanes = F64x8;
 }
 
 /// A plain float is also a batch of one: lanes of a single value.
@@ -61,6 +90,10 @@ single_lane!(f32);
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(align(32))]
 pub struct F64x4(pub [f64; 4]);
+
+/// Eight `f64` lanes: two [`F64x4`] halves (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct F64x8(pub F64x4, pub F64x4);
 
 /// Four `f32` lanes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -360,6 +393,179 @@ impl Real for F32x4 {
     }
 }
 
+impl PartialOrd for F64x8 {
+    /// Ordered only when every lane compares the same way.
+    #[inline]
+    fn partial_cmp(&self, o: &Self) -> Option<core::cmp::Ordering> {
+        let a = self.0.partial_cmp(&o.0)?;
+        (self.1.partial_cmp(&o.1)? == a).then_some(a)
+    }
+}
+
+macro_rules! halves_op {
+    ($tr:ident, $m:ident, $tra:ident, $ma:ident, $op:tt) => {
+        impl $tr for F64x8 {
+            type Output = Self;
+            #[inline(always)]
+            fn $m(self, o: Self) -> Self {
+                F64x8(self.0 $op o.0, self.1 $op o.1)
+            }
+        }
+        impl $tra for F64x8 {
+            #[inline(always)]
+            fn $ma(&mut self, o: Self) {
+                *self = *self $op o;
+            }
+        }
+    };
+}
+halves_op!(Add, add, AddAssign, add_assign, +);
+halves_op!(Sub, sub, SubAssign, sub_assign, -);
+halves_op!(Mul, mul, MulAssign, mul_assign, *);
+halves_op!(Div, div, DivAssign, div_assign, /);
+
+impl Neg for F64x8 {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        F64x8(-self.0, -self.1)
+    }
+}
+
+impl Lanes<F64x8> for F64x8 {
+    const WIDTH: usize = 1;
+    #[inline]
+    fn splat(v: Self) -> Self {
+        v
+    }
+    #[inline]
+    fn lane(self, _i: usize) -> Self {
+        self
+    }
+    #[inline]
+    fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+        Self::c(f(0))
+    }
+}
+
+impl Lanes<f64> for F64x8 {
+    const WIDTH: usize = 8;
+    #[inline]
+    fn splat(v: f64) -> Self {
+        F64x8(F64x4([v; 4]), F64x4([v; 4]))
+    }
+    #[inline]
+    fn lane(self, i: usize) -> f64 {
+        if i < 4 {
+            self.0 .0[i]
+        } else {
+            self.1 .0[i - 4]
+        }
+    }
+    #[inline]
+    fn plain_from_fn(mut f: impl FnMut(usize) -> f64) -> Self {
+        F64x8(
+            F64x4([f(0), f(1), f(2), f(3)]),
+            F64x4([f(4), f(5), f(6), f(7)]),
+        )
+    }
+}
+
+/// Applies a method of [`Real`] to both halves.
+macro_rules! halves {
+    ($($m:ident),*) => {
+        $(
+            #[inline(always)]
+            fn $m(self) -> Self {
+                F64x8(self.0.$m(), self.1.$m())
+            }
+        )*
+    };
+}
+
+impl Real for F64x8 {
+    type Plain = Self;
+    type Lanes = Self;
+    #[inline(always)]
+    fn c(v: f64) -> Self {
+        F64x8(F64x4::c(v), F64x4::c(v))
+    }
+    /// Lane 0 (see the module documentation: meaningful when all lanes are equal).
+    #[inline(always)]
+    fn value(self) -> f64 {
+        self.0.value()
+    }
+    #[inline(always)]
+    fn scale(self, k: Self) -> Self {
+        self * k
+    }
+    #[inline(always)]
+    fn from_plain(k: Self) -> Self {
+        k
+    }
+    #[inline(always)]
+    fn all(self, pred: impl Fn(f64) -> bool) -> bool {
+        self.0.all(&pred) && self.1.all(&pred)
+    }
+    #[inline(always)]
+    fn any(self, pred: impl Fn(f64) -> bool) -> bool {
+        self.0.any(&pred) || self.1.any(&pred)
+    }
+    #[inline(always)]
+    fn select(
+        self,
+        pred: impl Fn(f64) -> bool,
+        a: impl FnOnce() -> Self,
+        b: impl FnOnce() -> Self,
+    ) -> Self {
+        if self.all(&pred) {
+            return a();
+        }
+        if !self.any(&pred) {
+            return b();
+        }
+        let (a, b) = (a(), b());
+        F64x8(
+            self.0.select(&pred, || a.0, || b.0),
+            self.1.select(&pred, || a.1, || b.1),
+        )
+    }
+    #[inline(always)]
+    fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
+        F64x8(self.0.apply(&f), self.1.apply(&f))
+    }
+    halves!(sqrt, exp, ln, sin, cos, tan, acos, asin, atan, abs, e1);
+    #[inline(always)]
+    fn atan2(self, x: Self) -> Self {
+        F64x8(self.0.atan2(x.0), self.1.atan2(x.1))
+    }
+    #[inline(always)]
+    fn powf(self, e: Self) -> Self {
+        F64x8(self.0.powf(e.0), self.1.powf(e.1))
+    }
+    #[inline(always)]
+    fn powi(self, n: i32) -> Self {
+        F64x8(self.0.powi(n), self.1.powi(n))
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        F64x8(self.0.max(o.0), self.1.max(o.1))
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        F64x8(self.0.min(o.0), self.1.min(o.1))
+    }
+    #[inline(always)]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let (a, b) = (self.0.e1_and_exp(), self.1.e1_and_exp());
+        (F64x8(a.0, b.0), F64x8(a.1, b.1))
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        self.0.is_finite() && self.1.is_finite()
+    }
+}
+
 /// A lane mask: all bits set where `f` holds. Masks and bitwise blends (rather than `bool`s and
 /// `if`) keep the lane-wise code free of branches, so it compiles to SIMD compares and blends.
 #[inline(always)]
@@ -601,5 +807,27 @@ mod tests {
         assert_eq!(<F32x4 as Lanes<f32>>::lane(f.exp(), 2), libm::expf(3.0));
         let p = <F64x4 as Lanes<f64>>::plain_from_fn(|i| i as f64);
         assert_eq!(p.0, [0.0, 1.0, 2.0, 3.0]);
+        assert!(x.any(|v| v > 1.0) && !x.all(|v| v > 1.0));
+    }
+
+    #[test]
+    fn eight_lanes_are_two_halves() {
+        let x = <F64x8 as Lanes<f64>>::plain_from_fn(|i| i as f64 * 0.7 - 2.0);
+        let y = x.select(|v| v > 0.0, || x.ln(), || x.exp());
+        for i in 0..8 {
+            let xi = i as f64 * 0.7 - 2.0;
+            let want = if xi > 0.0 {
+                libm::log(xi)
+            } else {
+                libm::exp(xi)
+            };
+            assert_eq!(<F64x8 as Lanes<f64>>::lane(y, i).to_bits(), want.to_bits());
+        }
+        assert!(x.any(|v| v > 2.0) && !x.all(|v| v > 2.0));
+        let m = x.max(F64x8::c(0.1));
+        for i in 0..8 {
+            let xi = i as f64 * 0.7 - 2.0;
+            assert_eq!(<F64x8 as Lanes<f64>>::lane(m, i), xi.max(0.1));
+        }
     }
 }

@@ -21,7 +21,7 @@ pub mod lanes;
 
 pub use dual::Dual;
 pub use e1::{e1_f64, e1_with_exp, E1_MAX_REL_ERROR};
-pub use lanes::{F32x4, F64x4, Lanes};
+pub use lanes::{DualScalar, F32x4, F64x4, F64x8, Lanes};
 
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
@@ -45,8 +45,8 @@ pub trait Real:
     /// precomputed factors): `f64` for `f64` and [`Dual`], `f32` for `f32`, the lanes themselves
     /// for lanes.
     type Plain: Real;
-    /// Several values of this type computed together: [`F64x4`] for `f64`, [`F32x4`] for `f32`;
-    /// a dual is its own single lane (its derivative array is already its parallelism).
+    /// Several values of this type computed together: [`F64x8`] for `f64`, [`F32x4`] for `f32`,
+    /// duals on [`F64x4`] for duals on `f64`; lanes are their own single lane.
     type Lanes: Lanes<Self>;
 
     /// A constant (derivatives zero).
@@ -165,7 +165,7 @@ pub trait Real:
 
 impl Real for f64 {
     type Plain = f64;
-    type Lanes = F64x4;
+    type Lanes = F64x8;
     #[inline]
     fn c(v: f64) -> Self {
         v

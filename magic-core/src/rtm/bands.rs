@@ -48,6 +48,12 @@ pub trait Values: Copy {
     }
     /// Value `i` (0 past the end; lengths are checked by [`Packed::new`]).
     fn at(&self, i: usize) -> f64;
+    /// Values `start..start + len` as an `f64` slice, when they are stored as one (not for
+    /// `f32` bytes).
+    #[inline]
+    fn run(&self, _start: usize, _len: usize) -> Option<&[f64]> {
+        None
+    }
 }
 
 impl Values for &[f64] {
@@ -58,6 +64,10 @@ impl Values for &[f64] {
     #[inline]
     fn at(&self, i: usize) -> f64 {
         self.get(i).copied().unwrap_or(0.0)
+    }
+    #[inline]
+    fn run(&self, start: usize, len: usize) -> Option<&[f64]> {
+        self.get(start..start + len)
     }
 }
 
@@ -182,10 +192,15 @@ impl<V: Values> Packed<V> {
     /// repeat it.
     #[inline]
     fn rows<S: Real, W: Lanes<S>>(&self, i0: usize) -> SpectralRow<W::Plain> {
-        let last = self.n_rows - 1;
-        SpectralRow::from_fn(|k| {
-            W::plain_from_fn(|j| self.spectral.at((i0 + j).min(last) * ROW_WIDTH + k))
-        })
+        match self.spectral.run(i0 * ROW_WIDTH, W::WIDTH * ROW_WIDTH) {
+            Some(block) => SpectralRow::from_fn(|k| W::plain_from_fn(|j| block[j * ROW_WIDTH + k])),
+            None => {
+                let last = self.n_rows - 1;
+                SpectralRow::from_fn(|k| {
+                    W::plain_from_fn(|j| self.spectral.at((i0 + j).min(last) * ROW_WIDTH + k))
+                })
+            }
+        }
     }
 
     /// Weight of row `i` in band `b`.

@@ -14,7 +14,7 @@ use super::inform::{
 use super::prospect::{leaf_optics, Coefficients, Leaf, LeafOptics};
 use super::sail::{CampbellBins, Lidf, LITAB_DEG};
 use super::sensor::Resampling;
-use crate::real::{Dual, F64x4, Lanes, Real};
+use crate::real::{Dual, Lanes, Real};
 use crate::Error;
 
 /// Number of model inputs.
@@ -229,17 +229,25 @@ impl<'a> Inform<'a> {
         })
     }
 
-    /// The spectral rows of wavelength indices `ix` as lanes, row `ix[j]` in lane `j` (an index
-    /// past the end reads 0; [`Inform::new`] checked that the columns cover the matrix).
+    /// The spectral rows of wavelength indices `i0, i0 + 1, …` as lanes, row `i0 + j` in lane `j`
+    /// (indices past the grid read its last row).
     #[inline]
-    fn rows<S: Real, W: Lanes<S>>(&self, ix: &[usize]) -> SpectralRow<W::Plain> {
+    fn rows<S: Real, W: Lanes<S>>(&self, i0: usize) -> SpectralRow<W::Plain> {
         let t = &self.tables;
         let p = &t.prospect;
         let cols = [
             p.nr, p.k_cab, p.k_car, p.k_anth, p.k_brown, p.k_cw, p.k_cm, p.t12, p.tav90n,
             t.soil_dry, t.soil_wet, t.es, t.ed,
         ];
-        SpectralRow::from_fn(|k| W::plain_from_fn(|j| cols[k].get(ix[j]).copied().unwrap_or(0.0)))
+        SpectralRow::from_fn(|k| {
+            let col = cols[k];
+            match col.get(i0..i0 + W::WIDTH) {
+                Some(run) => W::plain_from_fn(|j| run[j]),
+                None => {
+                    W::plain_from_fn(|j| col.get(i0 + j).or(col.last()).copied().unwrap_or(0.0))
+                }
+            }
+        })
     }
 
     /// Validates the 21 inputs and computes the wavelength-independent terms.
@@ -357,7 +365,7 @@ impl<'a> Inform<'a> {
         let scene = self.scene(x, geometry)?.lanes();
         let mut out = [R::zero(); N_BANDS];
         self.sensor.integrate_lanes(
-            |ix| scene.wavelength(&self.rows::<R, R::Lanes>(ix)).r_forest,
+            |i0| scene.wavelength(&self.rows::<R, R::Lanes>(i0)).r_forest,
             &mut out,
         )?;
         Ok(out)
@@ -437,7 +445,7 @@ impl<'a> Inform<'a> {
         let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
         let mut out = [Dual::<N_LEARNED>::constant(0.0); N_BANDS];
         self.sensor.integrate_lanes(
-            |ix| lj.wavelengths(&self.rows::<Dual<N_LEARNED>, JacobianLanes>(ix)),
+            |i0| lj.wavelengths(&self.rows::<Dual<N_LEARNED>, JacobianLanes>(i0)),
             &mut out,
         )?;
         let mut y = [0.0; N_BANDS];
@@ -455,6 +463,9 @@ pub(crate) type JacobianLanes = <Dual<N_LEARNED> as Real>::Lanes;
 
 /// A dual in 4 variables on lanes of wavelengths.
 type Lanes4 = <Dual<4> as Real>::Lanes;
+
+/// Plain values on the lanes of [`Lanes4`].
+type PlainLanes = <Lanes4 as Real>::Plain;
 
 /// The exact derivatives of the forest reflectance with respect to the learned variables
 /// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, for lanes of wavelengths (four at a time), with the
@@ -524,7 +535,7 @@ impl LearnedJacobian {
     /// The forest reflectance at the wavelengths of `rows` (one per lane) with its derivatives
     /// with respect to `z`.
     #[inline]
-    pub(crate) fn wavelengths(&self, rows: &SpectralRow<F64x4>) -> JacobianLanes {
+    pub(crate) fn wavelengths(&self, rows: &SpectralRow<PlainLanes>) -> JacobianLanes {
         let lo = leaf_optics(&rows.coef, &self.leaf);
         let seeded = LeafOptics {
             refl: Dual::seed(lo.refl.v, 0),
@@ -532,7 +543,7 @@ impl LearnedJacobian {
         };
         let t = self.canopy.wavelength_with_leaf(rows, seeded);
         let r = t.r_forest;
-        let mut d = [F64x4::c(0.0); N_LEARNED];
+        let mut d = [PlainLanes::c(0.0); N_LEARNED];
         for (k, dk) in d.iter_mut().take(4).enumerate() {
             *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
         }
@@ -540,7 +551,7 @@ impl LearnedJacobian {
         d[5] = r.d[3];
         let basis = crown_fraction_terms(t.r_understory.v, t.r_crown_inf.v, t.t_s.v, t.t_o.v);
         for (db, b) in self.dfractions_dfc.iter().zip(basis) {
-            d[6] += b * F64x4::c(*db);
+            d[6] += b * PlainLanes::c(*db);
         }
         Dual { v: r.v, d }
     }
@@ -682,14 +693,14 @@ mod tests {
             assert!(spec.iter().all(|&r| r > 0.0 && r < 1.0), "{spec:?}");
             // Lanes and single wavelengths give identical results.
             let scene = model.scene(&inputs(), geometry).unwrap();
-            let ix = [0, 1, 2, 5];
             let lanes = scene
                 .lanes()
-                .wavelength(&model.rows::<f64, crate::real::F64x4>(&ix));
-            for (j, &i) in ix.iter().enumerate() {
+                .wavelength(&model.rows::<f64, <f64 as Real>::Lanes>(0));
+            for i in 0..6 {
                 let one = scene.wavelength(&model.row(i).unwrap());
-                assert_eq!(lanes.r_forest.0[j].to_bits(), one.r_forest.to_bits());
-                assert_eq!(lanes.leaf.trans.0[j].to_bits(), one.leaf.trans.to_bits());
+                let lane = |x: <f64 as Real>::Lanes| -> f64 { x.lane(i) };
+                assert_eq!(lane(lanes.r_forest).to_bits(), one.r_forest.to_bits());
+                assert_eq!(lane(lanes.leaf.trans).to_bits(), one.leaf.trans.to_bits());
             }
             // f32 and dual values agree with f64.
             let y32 = model

@@ -17,9 +17,6 @@ pub const S2_BANDS: [&str; 13] = [
 /// Largest number of bands a [`Resampling`] handles.
 pub const MAX_BANDS: usize = 16;
 
-/// Largest number of lanes [`Resampling::integrate_lanes`] evaluates together.
-pub const MAX_LANES: usize = 8;
-
 /// A resampling matrix with the wavelength spans where it is non-zero.
 #[derive(Clone, Copy, Debug)]
 pub struct Resampling<'a> {
@@ -161,42 +158,25 @@ impl<'a> Resampling<'a> {
         Ok(())
     }
 
-    /// [`Resampling::integrate`] with the spectrum evaluated `W::WIDTH` wavelengths at a time
-    /// (at most [`MAX_LANES`]): `spectrum(indices)` returns lanes whose lane `j` is the value at
-    /// `indices[j]`. The last batch is padded by repeating its last index; the padding lanes are
-    /// ignored.
+    /// [`Resampling::integrate`] with the spectrum evaluated `W::WIDTH` consecutive wavelengths
+    /// at a time: `spectrum(i0)` returns lanes whose lane `j` is the value at wavelength index
+    /// `i0 + j`. Runs start at the beginning of each span of [`Resampling::spans`], so a span's
+    /// last run may reach past it (or past the grid, which the caller clamps); those lanes are
+    /// ignored, as are wavelengths without weight.
     pub fn integrate_lanes<R: Real, W: Lanes<R>>(
         &self,
-        mut spectrum: impl FnMut(&[usize]) -> W,
+        mut spectrum: impl FnMut(usize) -> W,
         out: &mut [R],
     ) -> Result<(), Error> {
         self.check_out(out)?;
-        if W::WIDTH == 0 || W::WIDTH > MAX_LANES {
-            return Err(Error::OutOfRange {
-                what: "number of lanes",
-            });
-        }
         out.iter_mut().for_each(|o| *o = R::zero());
-        let mut idx = [0usize; MAX_LANES];
-        let mut n = 0;
-        let mut flush = |idx: &mut [usize; MAX_LANES], n: usize, out: &mut [R]| {
-            let last = idx[n - 1];
-            idx[n..W::WIDTH].iter_mut().for_each(|slot| *slot = last);
-            let values = spectrum(&idx[..W::WIDTH]);
-            for (j, &i) in idx[..n].iter().enumerate() {
-                self.accumulate(i, values.lane(j), out);
+        for &(a, b) in self.spans() {
+            for i0 in (a..=b).step_by(W::WIDTH.max(1)) {
+                let values = spectrum(i0);
+                for (j, i) in (i0..=b.min(i0 + W::WIDTH - 1)).enumerate() {
+                    self.accumulate(i, values.lane(j), out);
+                }
             }
-        };
-        for i in self.active() {
-            idx[n] = i;
-            n += 1;
-            if n == W::WIDTH {
-                flush(&mut idx, n, out);
-                n = 0;
-            }
-        }
-        if n > 0 {
-            flush(&mut idx, n, out);
         }
         Ok(())
     }
@@ -243,20 +223,23 @@ mod tests {
             .unwrap();
         assert_eq!(out, out2);
         let mut out3 = [0.0; 2];
-        r.integrate_lanes(|ix| ix[0] as f64, &mut out3).unwrap();
+        r.integrate_lanes(|i| i as f64, &mut out3).unwrap();
         assert_eq!(out, out3);
+        // Runs of four from the start of each span: 1..=4 and 4..=7 (lanes past the spans and
+        // the grid are evaluated but ignored).
         let mut out4 = [0.0; 2];
+        let mut starts = [0; 2];
         let mut batches = 0;
         r.integrate_lanes(
-            |ix| {
+            |i0| {
+                starts[batches] = i0;
                 batches += 1;
-                assert_eq!(ix, &[1, 2, 4, 4][..]);
-                F64x4(core::array::from_fn(|j| ix[j] as f64))
+                F64x4(core::array::from_fn(|j| (i0 + j) as f64))
             },
             &mut out4,
         )
         .unwrap();
-        assert_eq!((out, batches), (out4, 1));
+        assert_eq!((out, batches, starts), (out4, 2, [1, 4]));
     }
 
     #[test]
