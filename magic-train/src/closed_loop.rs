@@ -106,7 +106,11 @@ fn scores(model: &OwnedModel, data: &GnssData) -> Result<(Scores, Vec<u8>)> {
     let bytes = model.encode()?;
     let (r, (peak_dv, peak_depth, share)) = {
         let m = Model::decode(&bytes).map_err(|e| anyhow!("{e}"))?;
-        let r = [evaluate(&m, &data.train, "train")?, evaluate(&m, &data.valid, "valid")?, evaluate(&m, &data.test, "test")?];
+        let r = [
+            evaluate(&m, &data.train, "train")?,
+            evaluate(&m, &data.valid, "valid")?,
+            evaluate(&m, &data.test, "test")?,
+        ];
         let p = plausibility(&m, &split_rows(data, "test")?)?;
         (r, p)
     };
@@ -131,18 +135,32 @@ pub fn run(data: &GnssData, opts: &LoopOptions, dir: &Path) -> Result<Vec<Round>
     let mut first_b: Option<Vec<u8>> = None;
     let mut last_b: Vec<u8> = Vec::new();
     for round in 0..=opts.max_rounds {
-        eprintln!("round {round}: F = Mogi{}", effects.iter().map(|e| format!(" + {}", e.family())).collect::<String>());
+        eprintln!(
+            "round {round}: F = Mogi{}",
+            effects
+                .iter()
+                .map(|e| format!(" + {}", e.family()))
+                .collect::<String>()
+        );
         let (bm, _) = train_mogi_with(data, Variant::B, &effects, &opts.train, opts.seed)?;
         let (cm, _) = train_mogi_with(data, Variant::C, &effects, &opts.train, opts.seed)?;
         let (b, bbytes) = scores(&bm, data)?;
         let (c, _) = scores(&cm, data)?;
         std::fs::write(dir.join(format!("round{round}_B.magic")), &bbytes)?;
-        let classical = if opts.classical { Some(fit_split(data, "test", &effects)?) } else { None };
+        let classical = if opts.classical {
+            Some(fit_split(data, "test", &effects)?)
+        } else {
+            None
+        };
         let analysis = {
             let model = Model::decode(&bbytes).map_err(|e| anyhow!("{e}"))?;
             analyse(&model, data, &AnalysisOptions::default())?
         };
-        let candidates: Vec<CandidateSummary> = analysis.effects.iter().map(CandidateSummary::from).collect();
+        let candidates: Vec<CandidateSummary> = analysis
+            .effects
+            .iter()
+            .map(CandidateSummary::from)
+            .collect();
         let labels: Vec<String> = candidates.iter().map(|c| c.family.clone()).collect();
         let ve: Vec<f64> = candidates.iter().map(|c| c.variance_explained).collect();
         let ch: Vec<f64> = candidates.iter().map(|c| c.chance_level).collect();
@@ -185,7 +203,11 @@ pub fn run(data: &GnssData, opts: &LoopOptions, dir: &Path) -> Result<Vec<Round>
             .find(|c| c.significant && c.effect.is_some() && !have.contains(&c.family.as_str()));
         match next {
             Some(c) => {
-                effects.push(c.effect.clone().ok_or_else(|| anyhow!("candidate without an effect"))?);
+                effects.push(
+                    c.effect
+                        .clone()
+                        .ok_or_else(|| anyhow!("candidate without an effect"))?,
+                );
                 added = Some(CandidateSummary::from(c));
             }
             None => {
@@ -216,7 +238,11 @@ fn before_after_plots(data: &GnssData, first: &[u8], last: &[u8], dir: &Path) ->
     let (mut obs_s, mut before, mut after) = (vec![], vec![], vec![]);
     let mut res = [vec![[0f64; 3]; ns], vec![[0f64; 3]; ns]];
     for (row, t) in split.x.iter().zip(&days) {
-        let obs: Vec<f32> = row.iter().enumerate().map(|(k, v)| data.to_mm(k, *v as f64) as f32).collect();
+        let obs: Vec<f32> = row
+            .iter()
+            .enumerate()
+            .map(|(k, v)| data.to_mm(k, *v as f64) as f32)
+            .collect();
         let i0 = invert_at::<f64>(&m0, &obs, *t, &mut ws).map_err(|e| anyhow!("{e}"))?;
         let i1 = invert_at::<f64>(&m1, &obs, *t, &mut ws).map_err(|e| anyhow!("{e}"))?;
         obs_s.push(obs[c] as f64);
@@ -236,12 +262,24 @@ fn before_after_plots(data: &GnssData, first: &[u8], last: &[u8], dir: &Path) ->
         &dir.join(format!("timeseries_{name}_up.png")),
         &format!("{name} vertical (mm), test split: observed, F before and after the loop"),
         &days,
-        &[("observed", &obs_s), ("F, round 0", &before), ("F, last round", &after)],
+        &[
+            ("observed", &obs_s),
+            ("F, round 0", &before),
+            ("F, last round", &after),
+        ],
     )?;
-    let st: Vec<(String, f64, f64)> = data.names.iter().zip(&data.stations).map(|(n, s)| (n.clone(), s.x_km, s.y_km)).collect();
+    let st: Vec<(String, f64, f64)> = data
+        .names
+        .iter()
+        .zip(&data.stations)
+        .map(|(n, s)| (n.clone(), s.x_km, s.y_km))
+        .collect();
     let n = split.len().max(1) as f64;
     for (k, label) in ["before", "after"].iter().enumerate() {
-        let vec: Vec<(f64, f64)> = res[k].iter().map(|r| ((r[0] / n).sqrt(), (r[1] / n).sqrt())).collect();
+        let vec: Vec<(f64, f64)> = res[k]
+            .iter()
+            .map(|r| ((r[0] / n).sqrt(), (r[1] / n).sqrt()))
+            .collect();
         let val: Vec<f64> = res[k].iter().map(|r| (r[2] / n).sqrt()).collect();
         plots::station_map(
             &dir.join(format!("residual_map_{label}.png")),
@@ -258,13 +296,23 @@ fn write_report(data: &GnssData, rounds: &[Round], dir: &Path) -> Result<()> {
     let mut md = String::new();
     let _ = writeln!(md, "# The loop on {}\n", data.source);
     let _ = writeln!(md, "MSE in standardised units (paper Table 4: A 0.632, B 0.810, C 0.711). Plausible: share of test days with depth < 10 km and |ΔV| < 5·10⁶ m³.\n");
-    let _ = writeln!(md, "Classical: the per-day Levenberg–Marquardt fit of the same F (no encoder).\n");
+    let _ = writeln!(
+        md,
+        "Classical: the per-day Levenberg–Marquardt fit of the same F (no encoder).\n"
+    );
     let _ = writeln!(md, "| round | F | added (excess over chance) | B train / valid / test | B physics-only test | C test | classical test | B plausible | B peak ΔV @ depth |");
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
     for r in rounds {
-        let f = if r.effects.is_empty() { "Mogi".to_string() } else { format!("Mogi + {}", r.effects.join(" + ")) };
+        let f = if r.effects.is_empty() {
+            "Mogi".to_string()
+        } else {
+            format!("Mogi + {}", r.effects.join(" + "))
+        };
         let a = r.added.as_ref().map_or("–".to_string(), |c| {
-            format!("{} ({:.3} vs chance {:.3})", c.family, c.variance_explained, c.chance_level)
+            format!(
+                "{} ({:.3} vs chance {:.3})",
+                c.family, c.variance_explained, c.chance_level
+            )
         });
         let _ = writeln!(
             md,
@@ -282,18 +330,33 @@ fn write_report(data: &GnssData, rounds: &[Round], dir: &Path) -> Result<()> {
         );
     }
     if let Some(r) = rounds.last() {
-        let _ = writeln!(md, "\nThe loop stopped after round {}: {}.", r.round, r.stop);
+        let _ = writeln!(
+            md,
+            "\nThe loop stopped after round {}: {}.",
+            r.round, r.stop
+        );
     }
     let _ = writeln!(md, "\n## Candidates per round (B's residuals)\n");
     for r in rounds {
         let _ = writeln!(md, "Round {}:\n\n| family | variance explained (held out) | chance | significant | params |\n|---|---|---|---|---|", r.round);
         for c in &r.candidates {
-            let _ = writeln!(md, "| {} | {:.4} | {:.4} | {} | `{}` |", c.family, c.variance_explained, c.chance_level, c.significant, c.params);
+            let _ = writeln!(
+                md,
+                "| {} | {:.4} | {:.4} | {} | `{}` |",
+                c.family, c.variance_explained, c.chance_level, c.significant, c.params
+            );
         }
-        let _ = writeln!(md, "\n![effects, round {0}](round{0}_effects.png)\n", r.round);
+        let _ = writeln!(
+            md,
+            "\n![effects, round {0}](round{0}_effects.png)\n",
+            r.round
+        );
     }
     let _ = writeln!(md, "## Before and after\n\n![time series](timeseries_AV08_up.png)\n\n![before](residual_map_before.png) ![after](residual_map_after.png)");
     std::fs::write(dir.join("report.md"), md)?;
-    std::fs::write(dir.join("report.json"), serde_json::to_string_pretty(&json!({"data": data.source, "rounds": rounds}))?)?;
+    std::fs::write(
+        dir.join("report.json"),
+        serde_json::to_string_pretty(&json!({"data": data.source, "rounds": rounds}))?,
+    )?;
     Ok(())
 }

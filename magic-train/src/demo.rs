@@ -39,7 +39,11 @@ pub fn split_rows(data: &GnssData, split: &str) -> Result<Vec<ObsRow>> {
         .zip(&s.dates)
         .map(|(x, d)| ObsRow {
             date: Some(d.clone()),
-            obs: Ok(x.iter().enumerate().map(|(c, v)| data.to_mm(c, *v as f64) as f32).collect()),
+            obs: Ok(x
+                .iter()
+                .enumerate()
+                .map(|(c, v)| data.to_mm(c, *v as f64) as f32)
+                .collect()),
         })
         .collect())
 }
@@ -48,8 +52,16 @@ pub fn split_rows(data: &GnssData, split: &str) -> Result<Vec<ObsRow>> {
 pub fn max_param_diff(a: &[String], b: &[String], n_params: usize) -> Vec<f64> {
     let mut d = vec![0f64; n_params];
     for (x, y) in a.iter().zip(b) {
-        let px: Vec<f64> = x.split(',').take(n_params).filter_map(|v| v.parse().ok()).collect();
-        let py: Vec<f64> = y.split(',').take(n_params).filter_map(|v| v.parse().ok()).collect();
+        let px: Vec<f64> = x
+            .split(',')
+            .take(n_params)
+            .filter_map(|v| v.parse().ok())
+            .collect();
+        let py: Vec<f64> = y
+            .split(',')
+            .take(n_params)
+            .filter_map(|v| v.parse().ok())
+            .collect();
         if px.len() == n_params && py.len() == n_params {
             for j in 0..n_params {
                 d[j] = d[j].max((px[j] - py[j]).abs());
@@ -60,7 +72,13 @@ pub fn max_param_diff(a: &[String], b: &[String], n_params: usize) -> Vec<f64> {
 }
 
 /// Runs the main job.
-pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: bool) -> Result<()> {
+pub fn run(
+    data_dir: Option<&Path>,
+    seed: u64,
+    epochs: usize,
+    out: &Path,
+    qemu: bool,
+) -> Result<()> {
     let data = match data::locate(data_dir, "gnss") {
         Some(d) => GnssData::read(&d)?,
         None => {
@@ -69,8 +87,17 @@ pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: 
         }
     };
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
-    eprintln!("data: {} ({} / {} / {} days)", data.source, data.train.len(), data.valid.len(), data.test.len());
-    let cfg = TrainConfig { epochs, ..TrainConfig::gnss() };
+    eprintln!(
+        "data: {} ({} / {} / {} days)",
+        data.source,
+        data.train.len(),
+        data.valid.len(),
+        data.test.len()
+    );
+    let cfg = TrainConfig {
+        epochs,
+        ..TrainConfig::gnss()
+    };
     let mut table = Vec::new();
     let mut logs: Vec<(Variant, TrainLog)> = Vec::new();
     let mut c_model = None;
@@ -105,8 +132,13 @@ pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: 
     println!("| model | train | valid | test | physics-only test |");
     println!("|---|---|---|---|---|");
     for (name, s) in &table {
-        let p = s.splits[2].physics_mse.map_or("-".to_string(), |v| format!("{v:.4}"));
-        println!("| {name} | {:.4} | {:.4} | {:.4} | {p} |", s.splits[0].mse, s.splits[1].mse, s.splits[2].mse);
+        let p = s.splits[2]
+            .physics_mse
+            .map_or("-".to_string(), |v| format!("{v:.4}"));
+        println!(
+            "| {name} | {:.4} | {:.4} | {:.4} | {p} |",
+            s.splits[0].mse, s.splits[1].mse, s.splits[2].mse
+        );
     }
     println!();
     for (v, l) in &logs {
@@ -121,7 +153,12 @@ pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: 
     println!(
         "int8 vs f32 (test days): MSE {:+.4}; largest parameter difference: {}",
         table[2].1.splits[2].mse - table[0].1.splits[2].mse,
-        PARAM_NAMES.iter().zip(&quant_diff).map(|(n, d)| format!("{n} {d:.4}")).collect::<Vec<_>>().join(", ")
+        PARAM_NAMES
+            .iter()
+            .zip(&quant_diff)
+            .map(|(n, d)| format!("{n} {d:.4}"))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     let plaus = plausibility(&qm, &rows)?;
     println!(
@@ -138,7 +175,10 @@ pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: 
         let fw = crate::demo_qemu::run_test_days(&qpath, &qm, &rows, &q_lines)?;
         summary["firmware"] = fw;
     }
-    std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
+    std::fs::write(
+        out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?,
+    )?;
     println!("\nmodels and results in {}", out.display());
     Ok(())
 }

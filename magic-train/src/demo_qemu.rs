@@ -24,7 +24,11 @@ pub fn run_rows(model_path: &Path, model: &Model<'_>, rows: &[ObsRow]) -> Result
         );
     }
     if run.results.len() != rows.len() {
-        bail!("the firmware wrote {} result lines for {} input rows", run.results.len(), rows.len());
+        bail!(
+            "the firmware wrote {} result lines for {} input rows",
+            run.results.len(),
+            rows.len()
+        );
     }
     Ok(run)
 }
@@ -36,8 +40,16 @@ pub fn agreement(model: &Model<'_>, fw: &[String], host: &[String]) -> (Vec<f64>
     let mut worst = vec![0f64; n];
     let mut mismatched = 0;
     for (a, b) in fw.iter().zip(host) {
-        let pa: Vec<f64> = a.split(',').take(n).filter_map(|v| v.parse().ok()).collect();
-        let pb: Vec<f64> = b.split(',').take(n).filter_map(|v| v.parse().ok()).collect();
+        let pa: Vec<f64> = a
+            .split(',')
+            .take(n)
+            .filter_map(|v| v.parse().ok())
+            .collect();
+        let pb: Vec<f64> = b
+            .split(',')
+            .take(n)
+            .filter_map(|v| v.parse().ok())
+            .collect();
         if pa.len() != n || pb.len() != n {
             mismatched += usize::from(a.starts_with("error") != b.starts_with("error"));
             continue;
@@ -52,7 +64,12 @@ pub fn agreement(model: &Model<'_>, fw: &[String], host: &[String]) -> (Vec<f64>
 
 /// Runs the test days on the firmware, prints the comparison and the board's cost figures, and
 /// returns them as JSON.
-pub fn run_test_days(model_path: &Path, model: &Model<'_>, rows: &[ObsRow], host: &[String]) -> Result<serde_json::Value> {
+pub fn run_test_days(
+    model_path: &Path,
+    model: &Model<'_>,
+    rows: &[ObsRow],
+    host: &[String],
+) -> Result<serde_json::Value> {
     let run = run_rows(model_path, model, rows)?;
     let (worst, mismatched) = agreement(model, &run.results, host);
     let max = worst.iter().copied().fold(0.0, f64::max);

@@ -13,7 +13,9 @@ pub mod export;
 pub mod missing;
 pub mod nets;
 pub mod physics;
+pub mod pipeline;
 pub mod plots;
+pub mod qemu;
 pub mod records;
 pub mod reproduce;
 pub mod residuals;
@@ -21,8 +23,6 @@ pub mod rtm_cli;
 pub mod rtm_physics;
 pub mod rtm_pipeline;
 pub mod synth;
-pub mod pipeline;
-pub mod qemu;
 pub mod train;
 
 pub use data::gnss::GnssData;

@@ -2,14 +2,20 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
+use magic_core::model_file::Problem;
 use magic_core::{Model, Variant};
 use magic_train::data::{self, gnss::GnssData};
-use magic_core::model_file::Problem;
-use magic_train::{demo, evaluate, pipeline, records, residuals, rtm_cli, synth, OwnedModel, TrainConfig};
+use magic_train::{
+    demo, evaluate, pipeline, records, residuals, rtm_cli, synth, OwnedModel, TrainConfig,
+};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
-#[command(name = "magic", version, about = "Learned inversion of physical models with bias correction")]
+#[command(
+    name = "magic",
+    version,
+    about = "Learned inversion of physical models with bias correction"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -418,17 +424,39 @@ fn main() {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.cmd {
-        Cmd::Train { problem: TrainProblem::Mogi { variant, data_dir, epochs, seed, lambda, effects, smooth, out } } => {
+        Cmd::Train {
+            problem:
+                TrainProblem::Mogi {
+                    variant,
+                    data_dir,
+                    epochs,
+                    seed,
+                    lambda,
+                    effects,
+                    smooth,
+                    out,
+                },
+        } => {
             let data = load_gnss(data_dir.as_deref())?;
             let smooth_mean = match smooth.as_str() {
                 "sum" => false,
                 "mean" => true,
                 other => bail!("--smooth {other}: expected `sum` or `mean`"),
             };
-            let cfg = TrainConfig { epochs, lambda, smooth_mean, ..TrainConfig::gnss() };
-            let effects = effects.iter().map(|e| pipeline::latent_effect(e, &data)).collect::<Result<Vec<_>>>()?;
-            let (model, log) = pipeline::train_mogi_with(&data, variant.into(), &effects, &cfg, seed)?;
-            std::fs::write(&out, model.encode()?).with_context(|| format!("{}: cannot write", out.display()))?;
+            let cfg = TrainConfig {
+                epochs,
+                lambda,
+                smooth_mean,
+                ..TrainConfig::gnss()
+            };
+            let effects = effects
+                .iter()
+                .map(|e| pipeline::latent_effect(e, &data))
+                .collect::<Result<Vec<_>>>()?;
+            let (model, log) =
+                pipeline::train_mogi_with(&data, variant.into(), &effects, &cfg, seed)?;
+            std::fs::write(&out, model.encode()?)
+                .with_context(|| format!("{}: cannot write", out.display()))?;
             eprintln!(
                 "trained {:?}: {} epochs ({:.2} s/epoch, {:.1} s), best valid MSE {:.4} at epoch {} -> {}",
                 Variant::from(variant),
@@ -440,10 +468,36 @@ fn run(cli: Cli) -> Result<()> {
                 out.display()
             );
         }
-        Cmd::Train { problem: TrainProblem::Rtm { variant, data_dir, tables, epochs, seed, geometry, limit, out } } => {
-            rtm_cli::train(&rtm_cli::TrainArgs { variant, data_dir, tables, epochs, seed, geometry, limit, out })?;
+        Cmd::Train {
+            problem:
+                TrainProblem::Rtm {
+                    variant,
+                    data_dir,
+                    tables,
+                    epochs,
+                    seed,
+                    geometry,
+                    limit,
+                    out,
+                },
+        } => {
+            rtm_cli::train(&rtm_cli::TrainArgs {
+                variant,
+                data_dir,
+                tables,
+                epochs,
+                seed,
+                geometry,
+                limit,
+                out,
+            })?;
         }
-        Cmd::Eval { model, data_dir, split, json } => {
+        Cmd::Eval {
+            model,
+            data_dir,
+            split,
+            json,
+        } => {
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
             if let Problem::Rtm { .. } = m.problem {
@@ -461,7 +515,12 @@ fn run(cli: Cli) -> Result<()> {
                 println!();
             }
         }
-        Cmd::Export { model, quant, data_dir, out } => {
+        Cmd::Export {
+            model,
+            quant,
+            data_dir,
+            out,
+        } => {
             if quant != "int8" {
                 bail!("--quant {quant}: only int8 is supported");
             }
@@ -471,12 +530,24 @@ fn run(cli: Cli) -> Result<()> {
                 rtm_cli::export_int8(&m, data_dir.as_deref())?
             } else {
                 let data = load_gnss(data_dir.as_deref())?;
-                OwnedModel::from_model(&m).quantize_int8(&data.train.x)?.encode()?
+                OwnedModel::from_model(&m)
+                    .quantize_int8(&data.train.x)?
+                    .encode()?
             };
-            std::fs::write(&out, &qb).with_context(|| format!("{}: cannot write", out.display()))?;
-            eprintln!("exported int8 model: {} bytes -> {}", qb.len(), out.display());
+            std::fs::write(&out, &qb)
+                .with_context(|| format!("{}: cannot write", out.display()))?;
+            eprintln!(
+                "exported int8 model: {} bytes -> {}",
+                qb.len(),
+                out.display()
+            );
         }
-        Cmd::Invert { model, input, output, standardized } => {
+        Cmd::Invert {
+            model,
+            input,
+            output,
+            standardized,
+        } => {
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
             let rows = records::read_obs(&input, &m, standardized)?;
@@ -484,21 +555,53 @@ fn run(cli: Cli) -> Result<()> {
             report_row_errors(&rows);
             records::write_results(&output, &m, &rows, &lines)?;
             let bad = lines.iter().filter(|l| l.starts_with("error,")).count();
-            eprintln!("inverted {} rows ({} errors) -> {}", lines.len(), bad, output.display());
+            eprintln!(
+                "inverted {} rows ({} errors) -> {}",
+                lines.len(),
+                bad,
+                output.display()
+            );
             if bad > 0 {
-                bail!("{bad} of {} rows could not be inverted (error rows written)", lines.len());
+                bail!(
+                    "{bad} of {} rows could not be inverted (error rows written)",
+                    lines.len()
+                );
             }
         }
-        Cmd::Forward { problem: ForwardProblem::Mogi { input, output, stations } } => {
+        Cmd::Forward {
+            problem:
+                ForwardProblem::Mogi {
+                    input,
+                    output,
+                    stations,
+                },
+        } => {
             forward_mogi(&input, &output, stations.as_deref())?;
         }
-        Cmd::Forward { problem: ForwardProblem::Rtm { input, output, geometry, tables } } => {
+        Cmd::Forward {
+            problem:
+                ForwardProblem::Rtm {
+                    input,
+                    output,
+                    geometry,
+                    tables,
+                },
+        } => {
             rtm_cli::forward(&input, &output, tables.as_deref(), &geometry)?;
         }
-        Cmd::Lai { model, data_dir, json } => {
+        Cmd::Lai {
+            model,
+            data_dir,
+            json,
+        } => {
             rtm_cli::lai(&model, data_dir.as_deref(), json.as_deref())?;
         }
-        Cmd::Qemu { model, input, output, standardized } => {
+        Cmd::Qemu {
+            model,
+            input,
+            output,
+            standardized,
+        } => {
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
             let rows = records::read_obs(&input, &m, standardized)?;
@@ -518,36 +621,74 @@ fn run(cli: Cli) -> Result<()> {
                 mismatched
             );
         }
-        Cmd::Synth { scenario, seed, out } => {
+        Cmd::Synth {
+            scenario,
+            seed,
+            out,
+        } => {
             let sc = synth::Scenario::parse(&scenario)?;
             let s = synth::generate(sc, seed);
             synth::write_dir(&s.data, &out)?;
-            std::fs::write(out.join("truth.json"), serde_json::to_string_pretty(&s.truth)?)?;
-            eprintln!("wrote synthetic dataset ({}) -> {}", s.data.source, out.display());
+            std::fs::write(
+                out.join("truth.json"),
+                serde_json::to_string_pretty(&s.truth)?,
+            )?;
+            eprintln!(
+                "wrote synthetic dataset ({}) -> {}",
+                s.data.source,
+                out.display()
+            );
         }
-        Cmd::Residuals { model, data_dir, split, surrogates, seed, json, plots } => {
+        Cmd::Residuals {
+            model,
+            data_dir,
+            split,
+            surrogates,
+            seed,
+            json,
+            plots,
+        } => {
             let data = load_gnss(data_dir.as_deref())?;
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
-            let opts = residuals::AnalysisOptions { split, surrogates, seed, ..Default::default() };
+            let opts = residuals::AnalysisOptions {
+                split,
+                surrogates,
+                seed,
+                ..Default::default()
+            };
             let a = residuals::analyse(&m, &data, &opts)?;
             print!("{}", a.table());
             eprintln!("analysis took {:.2} s", a.seconds);
             if let Some(p) = json {
-                std::fs::write(&p, serde_json::to_string_pretty(&a.to_json())?).with_context(|| format!("{}: cannot write", p.display()))?;
+                std::fs::write(&p, serde_json::to_string_pretty(&a.to_json())?)
+                    .with_context(|| format!("{}: cannot write", p.display()))?;
             }
             if let Some(d) = plots {
                 residuals::write_plots(&a, &d)?;
                 eprintln!("plots -> {}", d.display());
             }
         }
-        Cmd::SynthCheck { seeds, first_seed, scenarios, epochs, json } => {
+        Cmd::SynthCheck {
+            seeds,
+            first_seed,
+            scenarios,
+            epochs,
+            json,
+        } => {
             let scs: Vec<synth::Scenario> = if scenarios.is_empty() {
                 synth::Scenario::ALL.to_vec()
             } else {
-                scenarios.iter().map(|s| synth::Scenario::parse(s)).collect::<Result<_>>()?
+                scenarios
+                    .iter()
+                    .map(|s| synth::Scenario::parse(s))
+                    .collect::<Result<_>>()?
             };
-            let cfg = TrainConfig { epochs, progress: false, ..TrainConfig::gnss() };
+            let cfg = TrainConfig {
+                epochs,
+                progress: false,
+                ..TrainConfig::gnss()
+            };
             let opts = residuals::AnalysisOptions::default();
             let mut rows = Vec::new();
             let mut out = Vec::new();
@@ -569,64 +710,146 @@ fn run(cli: Cli) -> Result<()> {
             }
             print!("{}", residuals::recovery_table(&rows));
             if let Some(p) = json {
-                std::fs::write(&p, serde_json::to_string_pretty(&out)?).with_context(|| format!("{}: cannot write", p.display()))?;
+                std::fs::write(&p, serde_json::to_string_pretty(&out)?)
+                    .with_context(|| format!("{}: cannot write", p.display()))?;
             }
         }
-        Cmd::Reproduce { problem, data_dir, tables, variants, seeds, epochs, json } => {
+        Cmd::Reproduce {
+            problem,
+            data_dir,
+            tables,
+            variants,
+            seeds,
+            epochs,
+            json,
+        } => {
             if problem == "rtm" {
-                return rtm_cli::reproduce(data_dir.as_deref(), tables.as_deref(), &seeds, epochs, &variants, json.as_deref());
+                return rtm_cli::reproduce(
+                    data_dir.as_deref(),
+                    tables.as_deref(),
+                    &seeds,
+                    epochs,
+                    &variants,
+                    json.as_deref(),
+                );
             }
             if problem != "mogi" {
                 bail!("reproduce {problem}: expected `mogi` or `rtm`");
             }
             let data = load_gnss(data_dir.as_deref())?;
-            let cfg = TrainConfig { epochs, ..TrainConfig::gnss() };
+            let cfg = TrainConfig {
+                epochs,
+                ..TrainConfig::gnss()
+            };
             let v = magic_train::reproduce::table4(&data, &seeds, &cfg)?;
             if let Some(p) = json {
-                std::fs::write(&p, serde_json::to_string_pretty(&v)?).with_context(|| format!("{}: cannot write", p.display()))?;
+                std::fs::write(&p, serde_json::to_string_pretty(&v)?)
+                    .with_context(|| format!("{}: cannot write", p.display()))?;
             }
         }
-        Cmd::Missing { model, data_dir, split, seed, json } => {
+        Cmd::Missing {
+            model,
+            data_dir,
+            split,
+            seed,
+            json,
+        } => {
             let data = load_gnss(data_dir.as_deref())?;
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
             let rows = magic_train::missing::evaluate_missing(&m, &data, &split, seed)?;
             magic_train::missing::print_table(&rows);
             if let Some(p) = json {
-                std::fs::write(&p, serde_json::to_string_pretty(&rows)?).with_context(|| format!("{}: cannot write", p.display()))?;
+                std::fs::write(&p, serde_json::to_string_pretty(&rows)?)
+                    .with_context(|| format!("{}: cannot write", p.display()))?;
             }
         }
-        Cmd::Classical { data_dir, split, effects, grid, json, csv } => {
+        Cmd::Classical {
+            data_dir,
+            split,
+            effects,
+            grid,
+            json,
+            csv,
+        } => {
             let grid = magic_train::classical::parse_grid(&grid)?;
             let data = load_gnss(data_dir.as_deref())?;
-            magic_train::classical::run(&data, &split, &effects, &grid, json.as_deref(), csv.as_deref())?;
+            magic_train::classical::run(
+                &data,
+                &split,
+                &effects,
+                &grid,
+                json.as_deref(),
+                csv.as_deref(),
+            )?;
         }
-        Cmd::Loop { problem, data_dir, report, seed, epochs, rounds, no_classical } => {
+        Cmd::Loop {
+            problem,
+            data_dir,
+            report,
+            seed,
+            epochs,
+            rounds,
+            no_classical,
+        } => {
             if problem != "mogi" {
                 bail!("loop --problem {problem}: only `mogi` is supported (the RTM loop needs per-spectrum illumination effects)");
             }
             let data = load_gnss(data_dir.as_deref())?;
             let opts = magic_train::closed_loop::LoopOptions {
                 seed,
-                train: TrainConfig { epochs, ..TrainConfig::gnss() },
+                train: TrainConfig {
+                    epochs,
+                    ..TrainConfig::gnss()
+                },
                 max_rounds: rounds,
                 classical: !no_classical,
             };
             let r = magic_train::closed_loop::run(&data, &opts, &report)?;
-            print!("{}", std::fs::read_to_string(report.join("report.md"))?.split("\n## ").next().unwrap_or(""));
+            print!(
+                "{}",
+                std::fs::read_to_string(report.join("report.md"))?
+                    .split("\n## ")
+                    .next()
+                    .unwrap_or("")
+            );
             eprintln!("{} rounds; report in {}", r.len(), report.display());
         }
-        Cmd::Demo { data_dir, seed, epochs, out, no_qemu } => {
+        Cmd::Demo {
+            data_dir,
+            seed,
+            epochs,
+            out,
+            no_qemu,
+        } => {
             demo::run(data_dir.as_deref(), seed, epochs, &out, !no_qemu)?;
         }
-        Cmd::Tenv3 { dir, out, stations, model, reference } => {
-            tenv3_cmd(&dir, &out, stations.as_deref(), model.as_deref(), reference.as_deref())?;
+        Cmd::Tenv3 {
+            dir,
+            out,
+            stations,
+            model,
+            reference,
+        } => {
+            tenv3_cmd(
+                &dir,
+                &out,
+                stations.as_deref(),
+                model.as_deref(),
+                reference.as_deref(),
+            )?;
         }
     }
     Ok(())
 }
 
-fn tenv3_cmd(dir: &Path, out: &Path, stations: Option<&Path>, model: Option<&Path>, reference: Option<&str>) -> Result<()> {
+fn tenv3_cmd(
+    dir: &Path,
+    out: &Path,
+    stations: Option<&Path>,
+    model: Option<&Path>,
+    reference: Option<&str>,
+) -> Result<()> {
     use magic_train::data::tenv3;
     let names = match (stations, model) {
         (Some(p), _) => Some(read_stations(p)?.0),
@@ -634,7 +857,9 @@ fn tenv3_cmd(dir: &Path, out: &Path, stations: Option<&Path>, model: Option<&Pat
         _ => None,
     };
     let reference = match reference {
-        Some(r) => tenv3::Reference::Day(tenv3::parse_ymd(r).with_context(|| format!("--reference {r}: expected YYYY-MM-DD"))?),
+        Some(r) => tenv3::Reference::Day(
+            tenv3::parse_ymd(r).with_context(|| format!("--reference {r}: expected YYYY-MM-DD"))?,
+        ),
         None => tenv3::Reference::Auto,
     };
     let read = tenv3::read_dir(dir, names.as_deref(), reference)?;
@@ -646,10 +871,24 @@ fn tenv3_cmd(dir: &Path, out: &Path, stations: Option<&Path>, model: Option<&Pat
     }
     read.daily.write_csv(out)?;
     let d = &read.daily;
-    let span = if d.is_empty() { String::new() } else { format!(", {} … {}", d.date(0), d.date(d.len() - 1)) };
-    eprintln!("{} stations, {} days{span}, {} bad lines skipped -> {}", d.stations.len(), d.len(), read.errors.len(), out.display());
+    let span = if d.is_empty() {
+        String::new()
+    } else {
+        format!(", {} … {}", d.date(0), d.date(d.len() - 1))
+    };
+    eprintln!(
+        "{} stations, {} days{span}, {} bad lines skipped -> {}",
+        d.stations.len(),
+        d.len(),
+        read.errors.len(),
+        out.display()
+    );
     if !read.errors.is_empty() {
-        bail!("{} bad lines or files in {} (skipped; everything else was written)", read.errors.len(), dir.display());
+        bail!(
+            "{} bad lines or files in {} (skipped; everything else was written)",
+            read.errors.len(),
+            dir.display()
+        );
     }
     Ok(())
 }
@@ -667,11 +906,21 @@ fn forward_mogi(input: &Path, output: &Path, stations: Option<&Path>) -> Result<
         Some(p) => read_stations(p)?,
         None => (
             synth::AKUTAN.iter().map(|s| s.0.to_string()).collect(),
-            synth::AKUTAN.iter().map(|s| magic_core::mogi::Station { x_km: s.1, y_km: s.2, z_km: s.3 }).collect(),
+            synth::AKUTAN
+                .iter()
+                .map(|s| magic_core::mogi::Station {
+                    x_km: s.1,
+                    y_km: s.2,
+                    z_km: s.3,
+                })
+                .collect(),
         ),
     };
     let t = data::table::Table::read(input, b',')?;
-    let cols: Vec<usize> = ["xcen_km", "ycen_km", "d_km", "dV_1e6m3"].iter().map(|c| t.col(c)).collect::<Result<_>>()?;
+    let cols: Vec<usize> = ["xcen_km", "ycen_km", "d_km", "dV_1e6m3"]
+        .iter()
+        .map(|c| t.col(c))
+        .collect::<Result<_>>()?;
     let id = t.col("sample_id").ok();
     let mut text = String::new();
     if id.is_some() {
@@ -681,9 +930,13 @@ fn forward_mogi(input: &Path, output: &Path, stations: Option<&Path>) -> Result<
     text.push('\n');
     let mut u = vec![0f64; 3 * st.len()];
     for r in 0..t.rows.len() {
-        let p: Vec<f64> = cols.iter().map(|&c| t.num(r, c, false)).collect::<Result<_>>()?;
+        let p: Vec<f64> = cols
+            .iter()
+            .map(|&c| t.num(r, c, false))
+            .collect::<Result<_>>()?;
         let p = [p[0], p[1], p[2], p[3]];
-        magic_core::mogi::field(&st, &p, &mut u).map_err(|e| anyhow::anyhow!("{}:{}: {e}", t.path, t.line(r)))?;
+        magic_core::mogi::field(&st, &p, &mut u)
+            .map_err(|e| anyhow::anyhow!("{}:{}: {e}", t.path, t.line(r)))?;
         if let Some(c) = id {
             text.push_str(t.text(r, c));
             text.push(',');
@@ -698,15 +951,27 @@ fn forward_mogi(input: &Path, output: &Path, stations: Option<&Path>) -> Result<
 }
 
 fn read_stations(p: &Path) -> Result<(Vec<String>, Vec<magic_core::mogi::Station>)> {
-    let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
-    let v: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", p.display()))?;
-    let obj = v.as_object().with_context(|| format!("{}: expected an object of stations", p.display()))?;
+    let text =
+        std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", p.display()))?;
+    let obj = v
+        .as_object()
+        .with_context(|| format!("{}: expected an object of stations", p.display()))?;
     let mut names = vec![];
     let mut st = vec![];
     for (k, s) in obj {
-        let g = |f: &str| s.get(f).and_then(|x| x.as_f64()).with_context(|| format!("{}: station {k}: `{f}` missing", p.display()));
+        let g = |f: &str| {
+            s.get(f)
+                .and_then(|x| x.as_f64())
+                .with_context(|| format!("{}: station {k}: `{f}` missing", p.display()))
+        };
         names.push(k.clone());
-        st.push(magic_core::mogi::Station { x_km: g("xE")?, y_km: g("yN")?, z_km: g("zV")? });
+        st.push(magic_core::mogi::Station {
+            x_km: g("xE")?,
+            y_km: g("yN")?,
+            z_km: g("zV")?,
+        });
     }
     Ok((names, st))
 }

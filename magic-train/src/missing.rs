@@ -44,7 +44,10 @@ impl Pattern {
     fn name(&self) -> String {
         match self {
             Pattern::Complete => "complete".into(),
-            Pattern::Random(k) => format!("{k} random station{} removed", if *k == 1 { "" } else { "s" }),
+            Pattern::Random(k) => format!(
+                "{k} random station{} removed",
+                if *k == 1 { "" } else { "s" }
+            ),
             Pattern::Fixed(_, n) => n.clone(),
         }
     }
@@ -52,22 +55,39 @@ impl Pattern {
 
 /// The two stations nearest a point.
 pub fn nearest_two(data: &GnssData, x: f64, y: f64) -> (Vec<usize>, String) {
-    let mut d: Vec<(f64, usize)> =
-        data.stations.iter().enumerate().map(|(i, s)| ((s.x_km - x).hypot(s.y_km - y), i)).collect();
+    let mut d: Vec<(f64, usize)> = data
+        .stations
+        .iter()
+        .enumerate()
+        .map(|(i, s)| ((s.x_km - x).hypot(s.y_km - y), i))
+        .collect();
     d.sort_by(|a, b| a.0.total_cmp(&b.0));
     let idx = vec![d[0].1, d[1].1];
-    let name = format!("nearest two removed ({}, {})", data.names[idx[0]], data.names[idx[1]]);
+    let name = format!(
+        "nearest two removed ({}, {})",
+        data.names[idx[0]], data.names[idx[1]]
+    );
     (idx, name)
 }
 
 /// Runs the patterns on a split. Returns the rows and the complete-data result lines' params.
-pub fn evaluate_missing(model: &Model<'_>, data: &GnssData, split: &str, seed: u64) -> Result<Vec<MissingRow>> {
+pub fn evaluate_missing(
+    model: &Model<'_>,
+    data: &GnssData,
+    split: &str,
+    seed: u64,
+) -> Result<Vec<MissingRow>> {
     let s = data.split(split)?;
     let days = s.days();
     let n_obs = model.n_obs();
     let ns = n_obs / 3;
     let mut ws = Workspace::default();
-    let mm = |row: &[f32]| -> Vec<f32> { row.iter().enumerate().map(|(c, v)| data.to_mm(c, *v as f64) as f32).collect() };
+    let mm = |row: &[f32]| -> Vec<f32> {
+        row.iter()
+            .enumerate()
+            .map(|(c, v)| data.to_mm(c, *v as f64) as f32)
+            .collect()
+    };
     // Complete-data reference.
     let mut reference = Vec::with_capacity(s.len());
     for (row, t) in s.x.iter().zip(&days) {
@@ -80,8 +100,13 @@ pub fn evaluate_missing(model: &Model<'_>, data: &GnssData, split: &str, seed: u
         v[v.len() / 2]
     };
     let (near, near_name) = nearest_two(data, med(0), med(1));
-    let patterns =
-        [Pattern::Complete, Pattern::Random(1), Pattern::Random(2), Pattern::Random(4), Pattern::Fixed(near, near_name)];
+    let patterns = [
+        Pattern::Complete,
+        Pattern::Random(1),
+        Pattern::Random(2),
+        Pattern::Random(4),
+        Pattern::Fixed(near, near_name),
+    ];
     let mut rng = StdRng::seed_from_u64(seed);
     let mut out = Vec::new();
     for pat in patterns {
@@ -104,7 +129,9 @@ pub fn evaluate_missing(model: &Model<'_>, data: &GnssData, split: &str, seed: u
                 if obs[c].is_nan() {
                     continue;
                 }
-                let r = (inv.recon[c] - model.obs_mean.get(c) as f64) / model.obs_scale.get(c) as f64 - row[c] as f64;
+                let r = (inv.recon[c] - model.obs_mean.get(c) as f64)
+                    / model.obs_scale.get(c) as f64
+                    - row[c] as f64;
                 se += r * r;
                 cnt += 1;
             }
@@ -112,15 +139,26 @@ pub fn evaluate_missing(model: &Model<'_>, data: &GnssData, split: &str, seed: u
                 dev[j].push((inv.params[j] - reference[i][j]).abs());
             }
         }
-        let mean_abs_dev = dev.iter().map(|d| d.iter().sum::<f64>() / d.len().max(1) as f64).collect();
+        let mean_abs_dev = dev
+            .iter()
+            .map(|d| d.iter().sum::<f64>() / d.len().max(1) as f64)
+            .collect();
         let p95_abs_dev = dev
             .iter_mut()
             .map(|d| {
                 d.sort_by(f64::total_cmp);
-                d.get(((d.len().max(1) - 1) as f64 * 0.95) as usize).copied().unwrap_or(0.0)
+                d.get(((d.len().max(1) - 1) as f64 * 0.95) as usize)
+                    .copied()
+                    .unwrap_or(0.0)
             })
             .collect();
-        out.push(MissingRow { pattern: pat.name(), n: s.len(), mse_observed: se / cnt.max(1) as f64, mean_abs_dev, p95_abs_dev });
+        out.push(MissingRow {
+            pattern: pat.name(),
+            n: s.len(),
+            mse_observed: se / cnt.max(1) as f64,
+            mean_abs_dev,
+            p95_abs_dev,
+        });
     }
     Ok(out)
 }
@@ -130,7 +168,18 @@ pub fn print_table(rows: &[MissingRow]) {
     println!("| stations | MSE (observed channels) | mean abs deviation x, y, depth (km), ΔV (10⁶ m³) | 95th percentile |");
     println!("|---|---|---|---|");
     for r in rows {
-        let f = |v: &[f64]| v.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>().join(", ");
-        println!("| {} | {:.4} | {} | {} |", r.pattern, r.mse_observed, f(&r.mean_abs_dev), f(&r.p95_abs_dev));
+        let f = |v: &[f64]| {
+            v.iter()
+                .map(|x| format!("{x:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        println!(
+            "| {} | {:.4} | {} | {} |",
+            r.pattern,
+            r.mse_observed,
+            f(&r.mean_abs_dev),
+            f(&r.p95_abs_dev)
+        );
     }
 }

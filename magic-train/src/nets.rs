@@ -28,13 +28,23 @@ pub struct Mlp {
 impl Mlp {
     /// Layers of the given widths, PyTorch's default initialisation (uniform ±1/√fan_in), hidden
     /// activation `hidden`, last activation `last`.
-    pub fn new(sizes: &[usize], hidden: Activation, last: Activation, rng: &mut StdRng, dev: &Device) -> Result<Mlp> {
+    pub fn new(
+        sizes: &[usize],
+        hidden: Activation,
+        last: Activation,
+        rng: &mut StdRng,
+        dev: &Device,
+    ) -> Result<Mlp> {
         let mut layers = Vec::new();
         for (i, win) in sizes.windows(2).enumerate() {
             let (n_in, n_out) = (win[0], win[1]);
             let bound = 1.0 / (n_in as f32).sqrt();
-            let w: Vec<f32> = (0..n_in * n_out).map(|_| rng.random_range(-bound..bound)).collect();
-            let b: Vec<f32> = (0..n_out).map(|_| rng.random_range(-bound..bound)).collect();
+            let w: Vec<f32> = (0..n_in * n_out)
+                .map(|_| rng.random_range(-bound..bound))
+                .collect();
+            let b: Vec<f32> = (0..n_out)
+                .map(|_| rng.random_range(-bound..bound))
+                .collect();
             let act = if i + 2 == sizes.len() { last } else { hidden };
             layers.push(Dense {
                 w: Var::from_vec(w, (n_out, n_in), dev)?,
@@ -49,7 +59,9 @@ impl Mlp {
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let mut h = x.clone();
         for l in &self.layers {
-            h = h.matmul(&l.w.as_tensor().t()?)?.broadcast_add(l.b.as_tensor())?;
+            h = h
+                .matmul(&l.w.as_tensor().t()?)?
+                .broadcast_add(l.b.as_tensor())?;
             h = match l.act {
                 Activation::Linear => h,
                 Activation::Relu => h.relu()?,
@@ -61,12 +73,18 @@ impl Mlp {
 
     /// Trainable variables.
     pub fn vars(&self) -> Vec<Var> {
-        self.layers.iter().flat_map(|l| [l.w.clone(), l.b.clone()]).collect()
+        self.layers
+            .iter()
+            .flat_map(|l| [l.w.clone(), l.b.clone()])
+            .collect()
     }
 
     /// A copy of the current weights.
     pub fn snapshot(&self) -> Result<Vec<(Tensor, Tensor)>> {
-        self.layers.iter().map(|l| Ok((l.w.as_tensor().copy()?, l.b.as_tensor().copy()?))).collect()
+        self.layers
+            .iter()
+            .map(|l| Ok((l.w.as_tensor().copy()?, l.b.as_tensor().copy()?)))
+            .collect()
     }
 
     /// Restores weights from [`Mlp::snapshot`].
@@ -130,7 +148,13 @@ impl Net {
         let dev = Device::Cpu;
         let (encoder, decoder) = match variant {
             Variant::A => {
-                let enc = Mlp::new(&encoder_sizes(n_obs, latent), Activation::Relu, Activation::Linear, rng, &dev)?;
+                let enc = Mlp::new(
+                    &encoder_sizes(n_obs, latent),
+                    Activation::Relu,
+                    Activation::Linear,
+                    rng,
+                    &dev,
+                )?;
                 let mut dec_sizes = encoder_sizes(n_obs, latent);
                 dec_sizes.reverse();
                 let dec = Mlp::new(&dec_sizes, Activation::Relu, Activation::Linear, rng, &dev)?;
@@ -138,9 +162,21 @@ impl Net {
             }
             Variant::B | Variant::C => {
                 let n_par = bounds.len();
-                let enc = Mlp::new(&encoder_sizes(n_obs, n_par), Activation::Relu, Activation::Sigmoid, rng, &dev)?;
+                let enc = Mlp::new(
+                    &encoder_sizes(n_obs, n_par),
+                    Activation::Relu,
+                    Activation::Sigmoid,
+                    rng,
+                    &dev,
+                )?;
                 let dec = if variant == Variant::C {
-                    Some(Mlp::new(&[n_obs, 4 * n_obs, n_obs], Activation::Relu, Activation::Linear, rng, &dev)?)
+                    Some(Mlp::new(
+                        &[n_obs, 4 * n_obs, n_obs],
+                        Activation::Relu,
+                        Activation::Linear,
+                        rng,
+                        &dev,
+                    )?)
                 } else {
                     None
                 };
@@ -177,20 +213,35 @@ impl Net {
         match self.variant {
             Variant::A => {
                 let z = self.encoder.forward(x)?;
-                let recon = self.decoder.as_ref().expect("variant A has a decoder").forward(&z)?;
-                Ok(Outputs { recon, physics: None })
+                let recon = self
+                    .decoder
+                    .as_ref()
+                    .expect("variant A has a decoder")
+                    .forward(&z)?;
+                Ok(Outputs {
+                    recon,
+                    physics: None,
+                })
             }
             Variant::B | Variant::C => {
                 let z = self.variables(x)?;
-                let phys = self.physics.as_ref().expect("variants B and C have physics");
+                let phys = self
+                    .physics
+                    .as_ref()
+                    .expect("variants B and C have physics");
                 let zt = Tensor::cat(&[&z, &days.to_dtype(z.dtype())?], 1)?;
                 let mm = zt.apply_op1(PhysicsOp(phys.clone()))?;
-                let fz = mm.broadcast_sub(&self.mean_t)?.broadcast_div(&self.scale_t)?;
+                let fz = mm
+                    .broadcast_sub(&self.mean_t)?
+                    .broadcast_div(&self.scale_t)?;
                 let recon = match &self.decoder {
                     Some(c) => c.forward(&fz)?,
                     None => fz.clone(),
                 };
-                Ok(Outputs { recon, physics: Some(fz) })
+                Ok(Outputs {
+                    recon,
+                    physics: Some(fz),
+                })
             }
         }
     }
@@ -206,11 +257,17 @@ impl Net {
 
     /// Snapshot of all weights.
     pub fn snapshot(&self) -> Result<(Vec<(Tensor, Tensor)>, Option<Vec<(Tensor, Tensor)>>)> {
-        Ok((self.encoder.snapshot()?, self.decoder.as_ref().map(|d| d.snapshot()).transpose()?))
+        Ok((
+            self.encoder.snapshot()?,
+            self.decoder.as_ref().map(|d| d.snapshot()).transpose()?,
+        ))
     }
 
     /// Restores a snapshot.
-    pub fn restore(&self, s: &(Vec<(Tensor, Tensor)>, Option<Vec<(Tensor, Tensor)>>)) -> Result<()> {
+    pub fn restore(
+        &self,
+        s: &(Vec<(Tensor, Tensor)>, Option<Vec<(Tensor, Tensor)>>),
+    ) -> Result<()> {
         self.encoder.restore(&s.0)?;
         if let (Some(d), Some(ds)) = (&self.decoder, &s.1) {
             d.restore(ds)?;
@@ -235,7 +292,11 @@ pub fn smoothness(f: &Tensor, n_seq: usize, t: usize) -> Result<Tensor> {
 
 /// A `(rows, 1)` f32 tensor of day numbers.
 pub fn days_tensor(days: &[f64]) -> Result<Tensor> {
-    Tensor::from_vec(days.iter().map(|d| *d as f32).collect::<Vec<f32>>(), (days.len(), 1), &Device::Cpu)
+    Tensor::from_vec(
+        days.iter().map(|d| *d as f32).collect::<Vec<f32>>(),
+        (days.len(), 1),
+        &Device::Cpu,
+    )
 }
 
 /// A `(rows, n)` f32 tensor from rows.

@@ -4,14 +4,22 @@
 //! row (rayon over the batch) and whose backward pass multiplies the incoming gradient by the
 //! model's exact Jacobian (forward-mode duals in the core). There is no second implementation of
 //! the physics in the trainer.
+//!
+//! The Jacobian computation yields the values too, so a training step that evaluates the values
+//! in the forward pass and the Jacobian in the backward pass computes the values twice. A model
+//! that offers a [`JacobianReuse`] lets the forward pass compute values and Jacobians together
+//! while training and the backward pass reuse them (see there); the op cannot know in its forward
+//! pass whether a backward pass will follow, so the choice adapts to what the last passes did.
 
-use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
 use crate::export::OwnedEffect;
+use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
 use magic_core::effects::mogi_with_effects;
 use magic_core::mogi::{self, Station};
 use magic_core::Dual;
 use rayon::prelude::*;
-use std::sync::Arc;
+use std::borrow::Cow;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 /// A forward model the trainer can differentiate through.
 pub trait Physics: Send + Sync {
@@ -22,7 +30,86 @@ pub trait Physics: Send + Sync {
     /// Values for an observation on day `t` (NaN if unknown): `out` has `n_obs` entries.
     fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), magic_core::Error>;
     /// Values and Jacobian (`jac` row-major, `n_obs × n_params`).
-    fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), magic_core::Error>;
+    fn jacobian(
+        &self,
+        p: &[f64],
+        t: f64,
+        out: &mut [f64],
+        jac: &mut [f64],
+    ) -> Result<(), magic_core::Error>;
+    /// Where [`PhysicsOp`] keeps Jacobians its forward pass computed for its backward pass; `None`
+    /// (the default): the forward pass computes values only, the backward pass the Jacobian.
+    fn jacobian_reuse(&self) -> Option<&JacobianReuse> {
+        None
+    }
+}
+
+/// Jacobians computed in [`PhysicsOp`]'s forward pass for its backward pass, for a model whose
+/// Jacobian costs a few times its values (INFORM: about 3.5×), so that a training step computes
+/// the values once instead of twice.
+///
+/// The forward pass computes Jacobians after a backward pass found none to reuse (training), and
+/// stops after a forward pass whose Jacobians were not used (validation, evaluation): a training
+/// epoch then wastes Jacobians on one validation batch, and evaluation runs at the cost of the
+/// values alone. Jacobians are matched to their backward pass by op and by input.
+#[derive(Debug, Default)]
+pub struct JacobianReuse {
+    /// Whether the next forward pass computes Jacobians.
+    eager: AtomicBool,
+    /// Jacobians of forward passes whose backward pass has not run yet.
+    pending: Mutex<Vec<Pending>>,
+}
+
+/// The Jacobians of one forward pass.
+#[derive(Debug)]
+struct Pending {
+    /// The op (its address, stable while candle holds it).
+    op: usize,
+    /// The op's input (rows of variables and day number).
+    input: Vec<f64>,
+    /// Jacobians row after row, `n_obs × n_params` each.
+    jac: Vec<f64>,
+}
+
+impl Clone for JacobianReuse {
+    /// A fresh, empty reuse (nothing pending, values only until a backward pass).
+    fn clone(&self) -> Self {
+        JacobianReuse::default()
+    }
+}
+
+impl JacobianReuse {
+    /// At the start of a forward pass: whether to compute Jacobians. Jacobians still pending
+    /// here were not used: they are dropped, and the next passes compute values only.
+    fn begin_forward(&self) -> bool {
+        let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+        if !pending.is_empty() {
+            pending.clear();
+            self.eager.store(false, Ordering::Relaxed);
+        }
+        self.eager.load(Ordering::Relaxed)
+    }
+
+    fn store(&self, p: Pending) {
+        self.pending
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(p);
+    }
+
+    /// The Jacobians op `op` computed for `input`, if any; when there are none the backward
+    /// pass computes them, and the next forward passes compute them ahead.
+    fn take(&self, op: usize, input: &[f64]) -> Option<Vec<f64>> {
+        let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
+        let found = pending.iter().position(|p| p.op == op && p.input == input);
+        match found {
+            Some(i) => Some(pending.swap_remove(i).jac),
+            None => {
+                self.eager.store(true, Ordering::Relaxed);
+                None
+            }
+        }
+    }
 }
 
 /// The Mogi source under a station network, with declared effects.
@@ -37,7 +124,10 @@ pub struct MogiPhysics {
 impl MogiPhysics {
     /// The source alone.
     pub fn new(stations: Vec<Station>) -> Self {
-        MogiPhysics { stations, effects: vec![] }
+        MogiPhysics {
+            stations,
+            effects: vec![],
+        }
     }
 }
 
@@ -53,17 +143,41 @@ impl Physics for MogiPhysics {
     }
     fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), magic_core::Error> {
         let bytes: Vec<_> = self.effects.iter().map(OwnedEffect::bytes).collect();
-        let eff: Vec<_> = self.effects.iter().zip(&bytes).map(|(e, b)| e.borrow(b)).collect();
+        let eff: Vec<_> = self
+            .effects
+            .iter()
+            .zip(&bytes)
+            .map(|(e, b)| e.borrow(b))
+            .collect();
         mogi_with_effects(&self.stations, &eff, p, t, out)
     }
-    fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), magic_core::Error> {
+    fn jacobian(
+        &self,
+        p: &[f64],
+        t: f64,
+        out: &mut [f64],
+        jac: &mut [f64],
+    ) -> Result<(), magic_core::Error> {
         let n = self.n_params();
         if n > MAX_DUAL || p.len() != n {
-            return Err(magic_core::Error::SizeMismatch { what: "variables", expected: n.min(MAX_DUAL), found: p.len() });
+            return Err(magic_core::Error::SizeMismatch {
+                what: "variables",
+                expected: n.min(MAX_DUAL),
+                found: p.len(),
+            });
         }
         let bytes: Vec<_> = self.effects.iter().map(OwnedEffect::bytes).collect();
-        let eff: Vec<_> = self.effects.iter().zip(&bytes).map(|(e, b)| e.borrow(b)).collect();
-        let pd: Vec<Dual<MAX_DUAL>> = p.iter().enumerate().map(|(j, v)| Dual::var(*v, j)).collect();
+        let eff: Vec<_> = self
+            .effects
+            .iter()
+            .zip(&bytes)
+            .map(|(e, b)| e.borrow(b))
+            .collect();
+        let pd: Vec<Dual<MAX_DUAL>> = p
+            .iter()
+            .enumerate()
+            .map(|(j, v)| Dual::var(*v, j))
+            .collect();
         let mut o = vec![Dual::<MAX_DUAL>::constant(0.0); out.len()];
         mogi_with_effects(&self.stations, &eff, &pd, t, &mut o)?;
         for (c, oc) in o.iter().enumerate() {
@@ -83,12 +197,23 @@ fn core_err(e: magic_core::Error) -> candle_core::Error {
     candle_core::Error::Msg(format!("forward model: {e}"))
 }
 
+impl PhysicsOp {
+    /// This op's identity while candle holds it (for [`JacobianReuse`]).
+    fn id(&self) -> usize {
+        self as *const Self as usize
+    }
+}
+
 impl CustomOp1 for PhysicsOp {
     fn name(&self) -> &'static str {
         "physics"
     }
 
-    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
+    fn cpu_fwd(
+        &self,
+        storage: &CpuStorage,
+        layout: &Layout,
+    ) -> candle_core::Result<(CpuStorage, Shape)> {
         let (b, p1) = layout.shape().dims2()?;
         let p = p1 - 1;
         let (start, end) = layout
@@ -97,14 +222,34 @@ impl CustomOp1 for PhysicsOp {
         let input: Vec<f64> = match storage {
             CpuStorage::F32(v) => v[start..end].iter().map(|x| *x as f64).collect(),
             CpuStorage::F64(v) => v[start..end].to_vec(),
-            _ => return Err(candle_core::Error::Msg("physics op takes f32 or f64".into())),
+            _ => {
+                return Err(candle_core::Error::Msg(
+                    "physics op takes f32 or f64".into(),
+                ))
+            }
         };
         let n = self.0.n_obs();
         let mut out = vec![0f64; b * n];
-        out.par_chunks_mut(n)
-            .zip(input.par_chunks(p1))
-            .try_for_each(|(o, z)| self.0.forward(&z[..p], z[p], o))
-            .map_err(core_err)?;
+        match self.0.jacobian_reuse().filter(|r| r.begin_forward()) {
+            Some(reuse) => {
+                let mut jac = vec![0f64; b * n * p];
+                out.par_chunks_mut(n)
+                    .zip(jac.par_chunks_mut(n * p))
+                    .zip(input.par_chunks(p1))
+                    .try_for_each(|((o, j), z)| self.0.jacobian(&z[..p], z[p], o, j))
+                    .map_err(core_err)?;
+                reuse.store(Pending {
+                    op: self.id(),
+                    input,
+                    jac,
+                });
+            }
+            None => out
+                .par_chunks_mut(n)
+                .zip(input.par_chunks(p1))
+                .try_for_each(|(o, z)| self.0.forward(&z[..p], z[p], o))
+                .map_err(core_err)?,
+        }
         let storage = match storage {
             CpuStorage::F64(_) => CpuStorage::F64(out),
             _ => CpuStorage::F32(out.into_iter().map(|x| x as f32).collect()),
@@ -112,19 +257,42 @@ impl CustomOp1 for PhysicsOp {
         Ok((storage, Shape::from((b, n))))
     }
 
-    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad: &Tensor) -> candle_core::Result<Option<Tensor>> {
+    fn bwd(
+        &self,
+        arg: &Tensor,
+        _res: &Tensor,
+        grad: &Tensor,
+    ) -> candle_core::Result<Option<Tensor>> {
         let (b, p1) = arg.dims2()?;
         let p = p1 - 1;
         let n = self.0.n_obs();
-        let z = arg.to_dtype(candle_core::DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
-        let g = grad.to_dtype(candle_core::DType::F64)?.flatten_all()?.to_vec1::<f64>()?;
+        let z = arg
+            .to_dtype(candle_core::DType::F64)?
+            .flatten_all()?
+            .to_vec1::<f64>()?;
+        let g = grad
+            .to_dtype(candle_core::DType::F64)?
+            .flatten_all()?
+            .to_vec1::<f64>()?;
+        let cached = self.0.jacobian_reuse().and_then(|r| r.take(self.id(), &z));
         let mut gz = vec![0f64; b * p1];
         gz.par_chunks_mut(p1)
             .enumerate()
             .try_for_each(|(i, gi)| {
-                let mut out = vec![0f64; n];
-                let mut jac = vec![0f64; n * p];
-                self.0.jacobian(&z[i * p1..i * p1 + p], z[i * p1 + p], &mut out, &mut jac)?;
+                let jac: Cow<[f64]> = match &cached {
+                    Some(all) => Cow::Borrowed(&all[i * n * p..(i + 1) * n * p]),
+                    None => {
+                        let mut out = vec![0f64; n];
+                        let mut jac = vec![0f64; n * p];
+                        self.0.jacobian(
+                            &z[i * p1..i * p1 + p],
+                            z[i * p1 + p],
+                            &mut out,
+                            &mut jac,
+                        )?;
+                        Cow::Owned(jac)
+                    }
+                };
                 for c in 0..n {
                     let gc = g[i * n + c];
                     for j in 0..p {
@@ -147,8 +315,16 @@ mod tests {
     #[test]
     fn gradient_through_op_matches_finite_differences() {
         let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(vec![
-            Station { x_km: -4.0, y_km: 6.0, z_km: 0.3 },
-            Station { x_km: 10.0, y_km: 0.5, z_km: 0.4 },
+            Station {
+                x_km: -4.0,
+                y_km: 6.0,
+                z_km: 0.3,
+            },
+            Station {
+                x_km: 10.0,
+                y_km: 0.5,
+                z_km: 0.4,
+            },
         ]));
         let dev = Device::Cpu;
         let z0 = [1.0f64, -0.5, 6.0, 2.0];
@@ -156,7 +332,13 @@ mod tests {
         let y = z.as_tensor().apply_op1(PhysicsOp(phys.clone())).unwrap();
         let loss = y.sqr().unwrap().sum_all().unwrap();
         let grads = loss.backward().unwrap();
-        let g = grads.get(&z).unwrap().flatten_all().unwrap().to_vec1::<f64>().unwrap();
+        let g = grads
+            .get(&z)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f64>()
+            .unwrap();
         let f = |p: &[f64]| {
             let mut o = vec![0.0; 6];
             phys.forward(p, f64::NAN, &mut o).unwrap();
@@ -168,7 +350,11 @@ mod tests {
             a[j] += h;
             b[j] -= h;
             let fd = (f(&a) - f(&b)) / (2.0 * h);
-            assert!((g[j] - fd).abs() <= 1e-6 * fd.abs().max(1.0), "{j}: {} vs {fd}", g[j]);
+            assert!(
+                (g[j] - fd).abs() <= 1e-6 * fd.abs().max(1.0),
+                "{j}: {} vs {fd}",
+                g[j]
+            );
         }
     }
 }

@@ -2,12 +2,12 @@
 //! dataset and turn it into a model file.
 
 use crate::data::gnss::GnssData;
+use crate::data::rtm_tables::intern;
 use crate::export::{OwnedEffect, OwnedModel};
 use crate::nets::Net;
 use crate::physics::{MogiPhysics, Physics};
 use crate::train::{train, Rows, TrainConfig, TrainLog};
 use anyhow::{anyhow, Result};
-use crate::data::rtm_tables::intern;
 use magic_core::model_file::{Names, Problem};
 use magic_core::mogi::{Station, Stations, PAPER_BOUNDS, STATION_BYTES};
 use magic_core::{invert_at, Model, Variant, Workspace};
@@ -23,22 +23,36 @@ pub fn mogi_problem(names: &[String], stations: &[Station]) -> Result<Problem<'s
         return Err(anyhow!("more stations than the core supports ({max})"));
     }
     if names.len() != stations.len() {
-        return Err(anyhow!("{} station names for {} stations", names.len(), stations.len()));
+        return Err(anyhow!(
+            "{} station names for {} stations",
+            names.len(),
+            stations.len()
+        ));
     }
     for name in names {
         if name.is_empty() || name.len() > magic_core::model_file::MAX_NAME || name.contains(',') {
-            return Err(anyhow!("station name `{name}` is empty, longer than 8 bytes or contains a comma"));
+            return Err(anyhow!(
+                "station name `{name}` is empty, longer than 8 bytes or contains a comma"
+            ));
         }
     }
     let mut bytes = vec![0u8; STATION_BYTES * stations.len()];
     Stations::encode(stations, &mut bytes).map_err(|e| anyhow!("{e}"))?;
     let joined = intern(names.join(",").into_bytes());
     let names = std::str::from_utf8(joined).map_err(|e| anyhow!("station names: {e}"))?;
-    Ok(Problem::Mogi { stations: Stations(intern(bytes)), names: Names(names) })
+    Ok(Problem::Mogi {
+        stations: Stations(intern(bytes)),
+        names: Names(names),
+    })
 }
 
 /// Trains a Mogi model of `variant` on `data` and returns it as an f32 model with its log.
-pub fn train_mogi(data: &GnssData, variant: Variant, cfg: &TrainConfig, seed: u64) -> Result<(OwnedModel, TrainLog)> {
+pub fn train_mogi(
+    data: &GnssData,
+    variant: Variant,
+    cfg: &TrainConfig,
+    seed: u64,
+) -> Result<(OwnedModel, TrainLog)> {
     train_mogi_with(data, variant, &[], cfg, seed)
 }
 
@@ -73,7 +87,10 @@ pub fn train_mogi_with(
     seed: u64,
 ) -> Result<(OwnedModel, TrainLog)> {
     let mut rng = StdRng::seed_from_u64(seed);
-    let physics: Arc<dyn Physics> = Arc::new(MogiPhysics { stations: data.stations.clone(), effects: effects.to_vec() });
+    let physics: Arc<dyn Physics> = Arc::new(MogiPhysics {
+        stations: data.stations.clone(),
+        effects: effects.to_vec(),
+    });
     let mut bounds: Vec<[f64; 2]> = PAPER_BOUNDS.to_vec();
     for e in effects {
         bounds.extend(effect_bounds(e));
@@ -89,8 +106,24 @@ pub fn train_mogi_with(
         &mut rng,
     )?;
     let (td, vd) = (data.train.days(), data.valid.days());
-    let log = train(&net, Rows { x: &data.train.x, days: &td }, Rows { x: &data.valid.x, days: &vd }, cfg, &mut rng)?;
-    let mut model = OwnedModel::from_net(&net, mogi_problem(&data.names, &data.stations)?, effects.to_vec())?;
+    let log = train(
+        &net,
+        Rows {
+            x: &data.train.x,
+            days: &td,
+        },
+        Rows {
+            x: &data.valid.x,
+            days: &vd,
+        },
+        cfg,
+        &mut rng,
+    )?;
+    let mut model = OwnedModel::from_net(
+        &net,
+        mogi_problem(&data.names, &data.stations)?,
+        effects.to_vec(),
+    )?;
     model.residual_threshold = residual_threshold(&model, &data.valid.x, &vd)?;
     Ok((model, log))
 }
@@ -102,8 +135,16 @@ pub fn residual_threshold(model: &OwnedModel, x: &[Vec<f32>], days: &[f64]) -> R
     let mut ws = Workspace::default();
     let mut r = Vec::with_capacity(x.len());
     for (row, t) in x.iter().zip(days) {
-        let obs: Vec<f32> = row.iter().enumerate().map(|(c, v)| v * model.scale[c] + model.mean[c]).collect();
-        r.push(invert_at::<f64>(&m, &obs, *t, &mut ws).map_err(|e| anyhow!("{e}"))?.residual_rms_std);
+        let obs: Vec<f32> = row
+            .iter()
+            .enumerate()
+            .map(|(c, v)| v * model.scale[c] + model.mean[c])
+            .collect();
+        r.push(
+            invert_at::<f64>(&m, &obs, *t, &mut ws)
+                .map_err(|e| anyhow!("{e}"))?
+                .residual_rms_std,
+        );
     }
     if r.is_empty() {
         return Ok(0.0);

@@ -25,17 +25,24 @@ pub struct ObsRow {
 impl ObsRow {
     /// Day number of the row's date (NaN without a date).
     pub fn day(&self) -> f64 {
-        self.date.as_deref().map_or(f64::NAN, crate::data::gnss::day_number)
+        self.date
+            .as_deref()
+            .map_or(f64::NAN, crate::data::gnss::day_number)
     }
 }
 
 /// Channel names of a model (`ux_<STA>` …).
 pub fn model_channels(model: &Model<'_>) -> Result<Vec<String>> {
     match &model.problem {
-        Problem::Mogi { names, .. } => Ok(channel_names(&names.iter().map(|s| s.to_string()).collect::<Vec<_>>())),
+        Problem::Mogi { names, .. } => Ok(channel_names(
+            &names.iter().map(|s| s.to_string()).collect::<Vec<_>>(),
+        )),
         Problem::Rtm { .. } => {
             let (idx, n) = model.problem.band_indices();
-            Ok(idx[..n].iter().map(|&b| magic_core::rtm::S2_BANDS[b].to_string()).collect())
+            Ok(idx[..n]
+                .iter()
+                .map(|&b| magic_core::rtm::S2_BANDS[b].to_string())
+                .collect())
         }
     }
 }
@@ -47,7 +54,10 @@ pub fn read_obs(path: &Path, model: &Model<'_>, standardized: bool) -> Result<Ve
     let chans = model_channels(model)?;
     let cols: Vec<usize> = match model.problem {
         // Band `B02` is the column `B02` or `B02_<name>` (as in the S2 data files).
-        Problem::Rtm { .. } => chans.iter().map(|c| crate::data::s2::band_column(&t, c)).collect::<Result<_>>()?,
+        Problem::Rtm { .. } => chans
+            .iter()
+            .map(|c| crate::data::s2::band_column(&t, c))
+            .collect::<Result<_>>()?,
         _ => chans.iter().map(|c| t.col(c)).collect::<Result<_>>()?,
     };
     let date = t.col("date").ok();
@@ -58,9 +68,19 @@ pub fn read_obs(path: &Path, model: &Model<'_>, standardized: bool) -> Result<Ve
         for (i, &c) in cols.iter().enumerate() {
             match t.num(r, c, true) {
                 Ok(v) => {
-                    let v = if standardized { v * model.obs_scale.get(i) as f64 + model.obs_mean.get(i) as f64 } else { v };
+                    let v = if standardized {
+                        v * model.obs_scale.get(i) as f64 + model.obs_mean.get(i) as f64
+                    } else {
+                        v
+                    };
                     if v.abs() > magic_core::invert::MAX_ABS_OBS {
-                        err = Some(format!("{}:{}:{}: column `{}`: {v} mm is beyond 10 m", t.path, t.line(r), c + 1, t.header[c]));
+                        err = Some(format!(
+                            "{}:{}:{}: column `{}`: {v} mm is beyond 10 m",
+                            t.path,
+                            t.line(r),
+                            c + 1,
+                            t.header[c]
+                        ));
                         break;
                     }
                     obs.push(v as f32);
@@ -71,7 +91,10 @@ pub fn read_obs(path: &Path, model: &Model<'_>, standardized: bool) -> Result<Ve
                 }
             }
         }
-        rows.push(ObsRow { date: date.map(|c| t.text(r, c).to_string()), obs: err.map_or(Ok(obs), Err) });
+        rows.push(ObsRow {
+            date: date.map(|c| t.text(r, c).to_string()),
+            obs: err.map_or(Ok(obs), Err),
+        });
     }
     Ok(rows)
 }
@@ -84,7 +107,9 @@ pub fn result_header(model: &Model<'_>, with_date: bool) -> String {
     }
     let names: &[&str] = match (&model.problem, model.variant) {
         (Problem::Mogi { .. }, _) => &magic_core::mogi::PARAM_NAMES,
-        (Problem::Rtm { .. }, magic_core::Variant::A) => &["z0", "z1", "z2", "z3", "z4", "z5", "z6"],
+        (Problem::Rtm { .. }, magic_core::Variant::A) => {
+            &["z0", "z1", "z2", "z3", "z4", "z5", "z6"]
+        }
         (Problem::Rtm { .. }, _) => &RTM_RESULT_NAMES,
     };
     for n in names {
@@ -140,7 +165,16 @@ pub fn firmware_lines(rows: &[ObsRow], with_date: bool) -> String {
                         out.push_str("no-date,");
                     }
                 }
-                let fields: Vec<String> = obs.iter().map(|v| if v.is_nan() { String::new() } else { format!("{v}") }).collect();
+                let fields: Vec<String> = obs
+                    .iter()
+                    .map(|v| {
+                        if v.is_nan() {
+                            String::new()
+                        } else {
+                            format!("{v}")
+                        }
+                    })
+                    .collect();
                 out.push_str(&fields.join(","));
             }
             Err(_) => out.push_str("invalid"),
@@ -151,9 +185,18 @@ pub fn firmware_lines(rows: &[ObsRow], with_date: bool) -> String {
 }
 
 /// Writes a result CSV: header, then one line per row (date first when present).
-pub fn write_results(path: &Path, model: &Model<'_>, rows: &[ObsRow], lines: &[String]) -> Result<()> {
+pub fn write_results(
+    path: &Path,
+    model: &Model<'_>,
+    rows: &[ObsRow],
+    lines: &[String],
+) -> Result<()> {
     if rows.len() != lines.len() {
-        return Err(anyhow!("{} result lines for {} input rows", lines.len(), rows.len()));
+        return Err(anyhow!(
+            "{} result lines for {} input rows",
+            lines.len(),
+            rows.len()
+        ));
     }
     let with_date = rows.iter().any(|r| r.date.is_some());
     let mut text = result_header(model, with_date);

@@ -20,7 +20,11 @@ pub const PAPER_TABLE4: [(Variant, [f64; 3]); 3] = [
 pub fn mean_std(v: &[f64]) -> (f64, f64) {
     let n = v.len().max(1) as f64;
     let m = v.iter().sum::<f64>() / n;
-    let var = if v.len() > 1 { v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0) } else { 0.0 };
+    let var = if v.len() > 1 {
+        v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
     (m, var.sqrt())
 }
 
@@ -46,7 +50,14 @@ pub fn table4(data: &GnssData, seeds: &[u64], cfg: &TrainConfig) -> Result<serde
             let (model, log) = train_mogi(data, variant, cfg, seed)?;
             let bytes = model.encode()?;
             let m = Model::decode(&bytes).map_err(|e| anyhow!("{e}"))?;
-            for (k, (split, name)) in [(&data.train, "train"), (&data.valid, "valid"), (&data.test, "test")].iter().enumerate() {
+            for (k, (split, name)) in [
+                (&data.train, "train"),
+                (&data.valid, "valid"),
+                (&data.test, "test"),
+            ]
+            .iter()
+            .enumerate()
+            {
                 let r = evaluate(&m, split, name)?;
                 per[k].push(r.mse);
                 if k == 2 {

@@ -108,16 +108,30 @@ pub fn valid_mse(net: &Net, data: Rows<'_>) -> Result<f64> {
 
 /// Trains `net` on `train` (rows of standardised observations, in time order when `seq_len > 1`),
 /// early-stopping on `valid`.
-pub fn train(net: &Net, train_rows: Rows<'_>, valid: Rows<'_>, cfg: &TrainConfig, rng: &mut StdRng) -> Result<TrainLog> {
+pub fn train(
+    net: &Net,
+    train_rows: Rows<'_>,
+    valid: Rows<'_>,
+    cfg: &TrainConfig,
+    rng: &mut StdRng,
+) -> Result<TrainLog> {
     let train = train_rows.x;
     let n = train.first().map_or(0, |r| r.len());
     let t = cfg.seq_len.max(1);
     let mut starts: Vec<usize> = (0..train.len() / t).map(|i| i * t).collect();
     let mut opt = AdamW::new(
         net.vars(),
-        ParamsAdamW { lr: cfg.lr, weight_decay: cfg.weight_decay, ..ParamsAdamW::default() },
+        ParamsAdamW {
+            lr: cfg.lr,
+            weight_decay: cfg.weight_decay,
+            ..ParamsAdamW::default()
+        },
     )?;
-    let bar = if cfg.progress { ProgressBar::new(cfg.epochs as u64) } else { ProgressBar::hidden() };
+    let bar = if cfg.progress {
+        ProgressBar::new(cfg.epochs as u64)
+    } else {
+        ProgressBar::hidden()
+    };
     bar.set_style(
         ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} epochs {msg} ({elapsed})")
             .unwrap_or_else(|_| ProgressStyle::default_bar())
@@ -125,7 +139,10 @@ pub fn train(net: &Net, train_rows: Rows<'_>, valid: Rows<'_>, cfg: &TrainConfig
     );
     bar.set_prefix(format!("train {:?}", net.variant));
     let start = Instant::now();
-    let mut log = TrainLog { best_valid: f64::INFINITY, ..TrainLog::default() };
+    let mut log = TrainLog {
+        best_valid: f64::INFINITY,
+        ..TrainLog::default()
+    };
     let mut best = net.snapshot()?;
     let mut since_best = 0;
     for epoch in 1..=cfg.epochs {
@@ -136,9 +153,15 @@ pub fn train(net: &Net, train_rows: Rows<'_>, valid: Rows<'_>, cfg: &TrainConfig
         let mut loss_sum = 0.0;
         let mut batches = 0usize;
         for group in starts.chunks(cfg.batch_seqs) {
-            let rows: Vec<&[f32]> = group.iter().flat_map(|&s| train[s..s + t].iter().map(|r| r.as_slice())).collect();
+            let rows: Vec<&[f32]> = group
+                .iter()
+                .flat_map(|&s| train[s..s + t].iter().map(|r| r.as_slice()))
+                .collect();
             let x = to_tensor(&rows, n)?;
-            let days: Vec<f64> = group.iter().flat_map(|&s| train_rows.days[s..s + t].iter().copied()).collect();
+            let days: Vec<f64> = group
+                .iter()
+                .flat_map(|&s| train_rows.days[s..s + t].iter().copied())
+                .collect();
             let out = net.forward(&x, &days_tensor(&days)?)?;
             let mut loss = mse(&out.recon, &x)?;
             if let (Some(f), true) = (&out.physics, cfg.lambda > 0.0 && t > 1) {

@@ -44,5 +44,10 @@ pub fn random_mogi_model(variant: Variant, seed: u64) -> OwnedModel {
         &mut rng,
     )
     .expect("network");
-    OwnedModel::from_net(&net, mogi_problem(&d.names, &d.stations).expect("problem"), vec![]).expect("model")
+    OwnedModel::from_net(
+        &net,
+        mogi_problem(&d.names, &d.stations).expect("problem"),
+        vec![],
+    )
+    .expect("model")
 }

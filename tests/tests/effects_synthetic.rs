@@ -11,15 +11,29 @@ use magic_train::synth::Scenario;
 use magic_train::TrainConfig;
 
 fn check(scenario: Scenario) {
-    let cfg = TrainConfig { epochs: 15, progress: false, ..TrainConfig::gnss() };
+    let cfg = TrainConfig {
+        epochs: 15,
+        progress: false,
+        ..TrainConfig::gnss()
+    };
     for seed in [1, 2] {
         let (r, a) = check_one(scenario, seed, &cfg, &AnalysisOptions::default()).unwrap();
-        assert!(r.ok(), "{} seed {seed}: {} ({:?})\n{}", scenario.name(), r.detail, r, a.table());
+        assert!(
+            r.ok(),
+            "{} seed {seed}: {} ({:?})\n{}",
+            scenario.name(),
+            r.detail,
+            r,
+            a.table()
+        );
         // The analysis of a ~2 000-day split takes seconds, not minutes.
         assert!(a.seconds < 30.0, "analysis took {:.1} s", a.seconds);
         if scenario != Scenario::Clean {
             let top = &a.effects[0];
-            assert!(top.effect.is_some(), "the top candidate carries the effect that adds it to F");
+            assert!(
+                top.effect.is_some(),
+                "the top candidate carries the effect that adds it to F"
+            );
             assert!(top.variance_explained > top.chance_level);
         }
     }
@@ -64,23 +78,41 @@ fn drift_is_found_at_its_stations() {
 fn fitted_effect_reproduces_the_fit() {
     // A step found by the analysis, added to F, reproduces the offset it measured: F with the
     // effect evaluated after the epoch minus before equals the offset in mm.
-    let cfg = TrainConfig { epochs: 15, progress: false, ..TrainConfig::gnss() };
+    let cfg = TrainConfig {
+        epochs: 15,
+        progress: false,
+        ..TrainConfig::gnss()
+    };
     let (_, a) = check_one(Scenario::Step, 1, &cfg, &AnalysisOptions::default()).unwrap();
     let step = a.effects.iter().find(|c| c.family == "step").unwrap();
-    let Some(magic_train::export::OwnedEffect::Step { station, epoch_day, offset_mm }) = step.effect.clone() else {
+    let Some(magic_train::export::OwnedEffect::Step {
+        station,
+        epoch_day,
+        offset_mm,
+    }) = step.effect.clone()
+    else {
         panic!("step candidate without a Step effect")
     };
     let params = &step.params;
-    assert_eq!(params["station"].as_str().unwrap(), a.names[station as usize]);
+    assert_eq!(
+        params["station"].as_str().unwrap(),
+        a.names[station as usize]
+    );
     let e = magic_core::time::parse_date(params["epoch"].as_str().unwrap()).unwrap() as f32;
     assert_eq!(e, epoch_day);
     for k in 0..3 {
         assert!((params["offset_mm"][k].as_f64().unwrap() - offset_mm[k] as f64).abs() < 1e-3);
     }
-    let core = magic_train::export::OwnedEffect::Step { station, epoch_day, offset_mm }.borrow(&[]);
+    let core = magic_train::export::OwnedEffect::Step {
+        station,
+        epoch_day,
+        offset_mm,
+    }
+    .borrow(&[]);
     let st = &a.stations;
     let (mut before, mut after) = (vec![0.0f64; 36], vec![0.0f64; 36]);
-    core.apply(st, &[], epoch_day as f64 - 1.0, &mut before).unwrap();
+    core.apply(st, &[], epoch_day as f64 - 1.0, &mut before)
+        .unwrap();
     core.apply(st, &[], epoch_day as f64, &mut after).unwrap();
     for k in 0..3 {
         let c = k * 12 + station as usize;

@@ -25,7 +25,11 @@ fn crc32(data: &[u8]) -> u32 {
     for &byte in data {
         c ^= byte as u32;
         for _ in 0..8 {
-            c = if c & 1 != 0 { (c >> 1) ^ 0xEDB8_8320 } else { c >> 1 };
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
         }
     }
     !c
@@ -33,14 +37,19 @@ fn crc32(data: &[u8]) -> u32 {
 
 #[test]
 fn round_trip_f32_and_int8() {
-    for bytes in [random_mogi_model(Variant::C, 1).encode().unwrap(), int8_bytes()] {
+    for bytes in [
+        random_mogi_model(Variant::C, 1).encode().unwrap(),
+        int8_bytes(),
+    ] {
         let m = Model::decode(&bytes).unwrap();
         assert_eq!(m.variant, Variant::C);
         assert_eq!(m.n_obs(), 36);
         assert_eq!(m.n_params(), 4);
         let inv = invert::<f64>(&m, &[0.5f32; 36], &mut Workspace::default()).unwrap();
         for j in 0..4 {
-            assert!(inv.params[j] >= m.bounds[j][0] as f64 && inv.params[j] <= m.bounds[j][1] as f64);
+            assert!(
+                inv.params[j] >= m.bounds[j][0] as f64 && inv.params[j] <= m.bounds[j][1] as f64
+            );
         }
     }
 }
@@ -50,7 +59,13 @@ fn every_truncation_is_an_error() {
     let b = int8_bytes();
     for n in 0..b.len() {
         let e = Model::decode(&b[..n]).unwrap_err();
-        assert!(matches!(e, Error::Truncated | Error::BadMagic | Error::CrcMismatch { .. }), "len {n}: {e}");
+        assert!(
+            matches!(
+                e,
+                Error::Truncated | Error::BadMagic | Error::CrcMismatch { .. }
+            ),
+            "len {n}: {e}"
+        );
     }
 }
 
@@ -62,7 +77,10 @@ fn flipped_bits_are_caught() {
         for bit in [0, 3, 7] {
             let mut c = b.clone();
             c[i] ^= 1 << bit;
-            assert!(Model::decode(&c).is_err(), "flip at byte {i} bit {bit} accepted");
+            assert!(
+                Model::decode(&c).is_err(),
+                "flip at byte {i} bit {bit} accepted"
+            );
         }
     }
 }
@@ -73,7 +91,13 @@ fn wrong_version_problem_and_sizes() {
     let mut v = b.clone();
     v[4..6].copy_from_slice(&(VERSION + 1).to_le_bytes());
     reseal(&mut v);
-    assert_eq!(Model::decode(&v).unwrap_err(), Error::UnsupportedVersion { found: VERSION + 1, supported: VERSION });
+    assert_eq!(
+        Model::decode(&v).unwrap_err(),
+        Error::UnsupportedVersion {
+            found: VERSION + 1,
+            supported: VERSION
+        }
+    );
 
     // A model for another problem kind.
     let mut own = random_mogi_model(Variant::B, 2);
@@ -85,7 +109,10 @@ fn wrong_version_problem_and_sizes() {
         weights: magic_core::quant::LeF32(&[]),
         lidf_beta: magic_core::quant::LeF32(&[]),
     };
-    assert!(own.encode().is_err(), "a GNSS network's model relabelled as RTM must not validate");
+    assert!(
+        own.encode().is_err(),
+        "a GNSS network's model relabelled as RTM must not validate"
+    );
 
     // Sizes that do not fit the network: one station fewer than the observation count.
     let mut own = random_mogi_model(Variant::B, 2);
@@ -110,16 +137,32 @@ fn invert_rejects_bad_observations_without_panicking() {
     let b = int8_bytes();
     let m = Model::decode(&b).unwrap();
     let mut ws = Workspace::default();
-    assert!(matches!(invert::<f32>(&m, &[0.0; 35], &mut ws), Err(Error::SizeMismatch { .. })));
+    assert!(matches!(
+        invert::<f32>(&m, &[0.0; 35], &mut ws),
+        Err(Error::SizeMismatch { .. })
+    ));
     let mut o = [0.0f32; 36];
     o[3] = f32::INFINITY;
-    assert!(matches!(invert::<f32>(&m, &o, &mut ws), Err(Error::NonFinite { index: 3, .. })));
+    assert!(matches!(
+        invert::<f32>(&m, &o, &mut ws),
+        Err(Error::NonFinite { index: 3, .. })
+    ));
     o[3] = 2.0e4;
-    assert!(matches!(invert::<f32>(&m, &o, &mut ws), Err(Error::OutOfRange { .. })));
+    assert!(matches!(
+        invert::<f32>(&m, &o, &mut ws),
+        Err(Error::OutOfRange { .. })
+    ));
     let all_missing = [f32::NAN; 36];
-    assert!(matches!(invert::<f32>(&m, &all_missing, &mut ws), Err(Error::TooFewObservations { .. })));
+    assert!(matches!(
+        invert::<f32>(&m, &all_missing, &mut ws),
+        Err(Error::TooFewObservations { .. })
+    ));
     o[3] = f32::NAN;
     let inv = invert::<f32>(&m, &o, &mut ws).unwrap();
     assert!(inv.flags.has(magic_core::Flags::MISSING));
-    assert_eq!(inv.used, (1 << 12) - 1, "station 3 still has its north and up channels");
+    assert_eq!(
+        inv.used,
+        (1 << 12) - 1,
+        "station 3 still has its north and up channels"
+    );
 }

@@ -3,16 +3,23 @@
 //! dual-number Jacobian against central differences ≤ 1e-6 relative.
 
 use magic_core::mogi::{field, field_jacobian, Station};
+use magic_tests::shared_data;
 use magic_train::data::gnss::GnssData;
 use magic_train::data::table::Table;
-use magic_tests::shared_data;
 
 fn load() -> (Vec<Station>, Vec<[f64; 4]>, Vec<Vec<f64>>) {
     let dir = shared_data();
     let g = GnssData::read(&dir.join("gnss")).expect("gnss data");
     let t = Table::read(&dir.join("oracle/mogi_oracle_1k.csv"), b',').expect("oracle");
-    let pc: Vec<usize> = ["xcen_km", "ycen_km", "d_km", "dV_1e6m3"].iter().map(|c| t.col(c).unwrap()).collect();
-    let oc: Vec<usize> = g.channel_names().iter().map(|c| t.col(c).unwrap()).collect();
+    let pc: Vec<usize> = ["xcen_km", "ycen_km", "d_km", "dV_1e6m3"]
+        .iter()
+        .map(|c| t.col(c).unwrap())
+        .collect();
+    let oc: Vec<usize> = g
+        .channel_names()
+        .iter()
+        .map(|c| t.col(c).unwrap())
+        .collect();
     let mut p = vec![];
     let mut u = vec![];
     for r in 0..t.rows.len() {
@@ -60,7 +67,10 @@ fn jacobian_matches_central_differences_on_oracle_inputs() {
             field(&st, &a, &mut fa).unwrap();
             field(&st, &b, &mut fb).unwrap();
             // Relative to the column's largest derivative (entries near zero carry no relative meaning).
-            let scale = (0..36).map(|c| jac[c][j].abs()).fold(0f64, f64::max).max(1e-12);
+            let scale = (0..36)
+                .map(|c| jac[c][j].abs())
+                .fold(0f64, f64::max)
+                .max(1e-12);
             for c in 0..36 {
                 let fd = (fa[c] - fb[c]) / (2.0 * h);
                 worst = worst.max((jac[c][j] - fd).abs() / scale);

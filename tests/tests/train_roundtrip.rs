@@ -8,12 +8,23 @@ use magic_train::{evaluate, synth, TrainConfig};
 #[test]
 fn tiny_training_exports_and_inverts() {
     let data = synth::generate(synth::Scenario::Clean, 11).data;
-    let cfg = TrainConfig { epochs: 4, progress: false, ..TrainConfig::gnss() };
+    let cfg = TrainConfig {
+        epochs: 4,
+        progress: false,
+        ..TrainConfig::gnss()
+    };
     let (model, log) = train_mogi(&data, Variant::C, &cfg, 11).unwrap();
     assert_eq!(log.epochs, 4);
-    assert!(log.history.iter().all(|(l, v)| l.is_finite() && v.is_finite()));
+    assert!(log
+        .history
+        .iter()
+        .all(|(l, v)| l.is_finite() && v.is_finite()));
     let f = model.encode().unwrap();
-    let q = model.quantize_int8(&data.train.x).unwrap().encode().unwrap();
+    let q = model
+        .quantize_int8(&data.train.x)
+        .unwrap()
+        .encode()
+        .unwrap();
     let fm = Model::decode(&f).unwrap();
     let qm = Model::decode(&q).unwrap();
     let ef = evaluate(&fm, &data.test, "test").unwrap();
@@ -22,16 +33,38 @@ fn tiny_training_exports_and_inverts() {
     assert!(log.best_valid <= log.history[0].1);
     // Early-stopping restores the best weights: the exported model scores its best validation MSE.
     let ev = evaluate(&fm, &data.valid, "valid").unwrap();
-    assert!((ev.mse - log.best_valid).abs() < 1e-3, "{} vs {}", ev.mse, log.best_valid);
-    assert!((eq.mse - ef.mse).abs() < 0.02, "int8 {} vs f32 {}", eq.mse, ef.mse);
+    assert!(
+        (ev.mse - log.best_valid).abs() < 1e-3,
+        "{} vs {}",
+        ev.mse,
+        log.best_valid
+    );
+    assert!(
+        (eq.mse - ef.mse).abs() < 0.02,
+        "int8 {} vs f32 {}",
+        eq.mse,
+        ef.mse
+    );
     assert!(q.len() < f.len() / 2);
 }
 
 #[test]
 fn seeds_make_runs_repeatable() {
     let data = synth::generate(synth::Scenario::Clean, 4).data;
-    let cfg = TrainConfig { epochs: 2, progress: false, ..TrainConfig::gnss() };
-    let a = train_mogi(&data, Variant::B, &cfg, 9).unwrap().0.encode().unwrap();
-    let b = train_mogi(&data, Variant::B, &cfg, 9).unwrap().0.encode().unwrap();
+    let cfg = TrainConfig {
+        epochs: 2,
+        progress: false,
+        ..TrainConfig::gnss()
+    };
+    let a = train_mogi(&data, Variant::B, &cfg, 9)
+        .unwrap()
+        .0
+        .encode()
+        .unwrap();
+    let b = train_mogi(&data, Variant::B, &cfg, 9)
+        .unwrap()
+        .0
+        .encode()
+        .unwrap();
     assert_eq!(a, b);
 }

@@ -86,36 +86,69 @@ impl GnssData {
     /// Reads a folder laid out like the paper's `gnss/`.
     pub fn read(dir: &Path) -> Result<GnssData> {
         let st_path = dir.join("stations.json");
-        let text = std::fs::read_to_string(&st_path).with_context(|| format!("{}: cannot read", st_path.display()))?;
-        let json: serde_json::Value =
-            serde_json::from_str(&text).with_context(|| format!("{}: not valid JSON", st_path.display()))?;
-        let obj = json.as_object().with_context(|| format!("{}: expected an object of stations", st_path.display()))?;
+        let text = std::fs::read_to_string(&st_path)
+            .with_context(|| format!("{}: cannot read", st_path.display()))?;
+        let json: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not valid JSON", st_path.display()))?;
+        let obj = json
+            .as_object()
+            .with_context(|| format!("{}: expected an object of stations", st_path.display()))?;
 
         let train_t = Table::read(&dir.join("train.csv"), b',')?;
         let names = station_names_from_header(&train_t.header, &train_t.path)?;
         let mut stations = Vec::new();
         for n in &names {
-            let s = obj.get(n).with_context(|| format!("{}: station {n} (from the CSV header) is missing", st_path.display()))?;
+            let s = obj.get(n).with_context(|| {
+                format!(
+                    "{}: station {n} (from the CSV header) is missing",
+                    st_path.display()
+                )
+            })?;
             let get = |k: &str| {
-                s.get(k)
-                    .and_then(|v| v.as_f64())
-                    .with_context(|| format!("{}: station {n}: `{k}` missing or not a number", st_path.display()))
+                s.get(k).and_then(|v| v.as_f64()).with_context(|| {
+                    format!(
+                        "{}: station {n}: `{k}` missing or not a number",
+                        st_path.display()
+                    )
+                })
             };
-            stations.push(Station { x_km: get("xE")?, y_km: get("yN")?, z_km: get("zV")? });
+            stations.push(Station {
+                x_km: get("xE")?,
+                y_km: get("yN")?,
+                z_km: get("zV")?,
+            });
         }
         let mean = read_vector(&dir.join("train_x_mean.csv"))?;
         let scale = read_vector(&dir.join("train_x_scale.csv"))?;
         let n = 3 * names.len();
         if mean.len() != n || scale.len() != n {
-            bail!("{}: mean/scale files must hold {n} values (found {} and {})", dir.display(), mean.len(), scale.len());
+            bail!(
+                "{}: mean/scale files must hold {n} values (found {} and {})",
+                dir.display(),
+                mean.len(),
+                scale.len()
+            );
         }
         if let Some(i) = scale.iter().position(|s| *s <= 0.0) {
-            bail!("{}:{}:1: scale must be positive", dir.join("train_x_scale.csv").display(), i + 1);
+            bail!(
+                "{}:{}:1: scale must be positive",
+                dir.join("train_x_scale.csv").display(),
+                i + 1
+            );
         }
         let train = read_split(&train_t, &names)?;
         let valid = read_split(&Table::read(&dir.join("valid.csv"), b',')?, &names)?;
         let test = read_split(&Table::read(&dir.join("test.csv"), b',')?, &names)?;
-        Ok(GnssData { names, stations, mean, scale, train, valid, test, source: dir.display().to_string() })
+        Ok(GnssData {
+            names,
+            stations,
+            mean,
+            scale,
+            train,
+            valid,
+            test,
+            source: dir.display().to_string(),
+        })
     }
 }
 
@@ -132,7 +165,10 @@ pub fn channel_names(names: &[String]) -> Vec<String> {
 
 /// Station names in the order of the `ux_` columns of a header.
 pub fn station_names_from_header(header: &[String], path: &str) -> Result<Vec<String>> {
-    let names: Vec<String> = header.iter().filter_map(|h| h.strip_prefix("ux_").map(str::to_string)).collect();
+    let names: Vec<String> = header
+        .iter()
+        .filter_map(|h| h.strip_prefix("ux_").map(str::to_string))
+        .collect();
     if names.is_empty() {
         bail!("{path}:1: no `ux_<STATION>` columns in the header");
     }
@@ -147,7 +183,10 @@ pub fn station_names_from_header(header: &[String], path: &str) -> Result<Vec<St
 }
 
 fn read_split(t: &Table, names: &[String]) -> Result<Split> {
-    let cols: Vec<usize> = channel_names(names).iter().map(|c| t.col(c)).collect::<Result<_>>()?;
+    let cols: Vec<usize> = channel_names(names)
+        .iter()
+        .map(|c| t.col(c))
+        .collect::<Result<_>>()?;
     let date_col = t.col("date").ok();
     let mut split = Split::default();
     for r in 0..t.rows.len() {
@@ -156,7 +195,9 @@ fn read_split(t: &Table, names: &[String]) -> Result<Split> {
             row.push(t.num(r, c, false)? as f32);
         }
         split.x.push(row);
-        split.dates.push(date_col.map_or_else(String::new, |c| t.text(r, c).to_string()));
+        split
+            .dates
+            .push(date_col.map_or_else(String::new, |c| t.text(r, c).to_string()));
     }
     Ok(split)
 }

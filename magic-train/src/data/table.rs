@@ -46,7 +46,11 @@ impl Table {
             }
             rows.push((line, rec));
         }
-        Ok(Table { path: name, header, rows })
+        Ok(Table {
+            path: name,
+            header,
+            rows,
+        })
     }
 
     /// Index of a column by name.
@@ -73,7 +77,12 @@ impl Table {
             )
         })?;
         if !v.is_finite() {
-            bail!("{}:{line}:{}: column `{}`: expected a finite number, found `{text}`", self.path, c + 1, self.header[c]);
+            bail!(
+                "{}:{line}:{}: column `{}`: expected a finite number, found `{text}`",
+                self.path,
+                c + 1,
+                self.header[c]
+            );
         }
         Ok(v)
     }
