@@ -15,7 +15,9 @@
 //! ([`Names`]) instead of fixed-capacity vectors, which makes the decoded [`Model`] small enough
 //! to decode within a microcontroller's stack budget; 5 stores int8 weights in blocks of four
 //! rows ([`crate::quant::blocked_index`]) after 0–3 bytes of padding that align them to four bytes
-//! in the file (the `SMLAD` kernel's layout).
+//! in the file (the `SMLAD` kernel's layout), and leaves out the per-row arrays an int8 layer's
+//! place in its chain does not use (weight scales of requantised layers, multipliers and shifts
+//! of dequantised ones).
 
 use crate::effects::{Effect, MAX_EFFECTS};
 use crate::mogi::{self, Stations};

@@ -136,9 +136,19 @@ impl Layer<'_> {
                 }
                 len("int8 layer weight bytes", w.len(), r * c)?;
                 len("int8 layer bias bytes", bias.0.len(), 4 * r)?;
-                len("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
-                len("int8 layer multiplier bytes", mult.0.len(), 4 * r)?;
-                len("int8 layer shift bytes", shift.len(), r)?;
+                // The weight scales serve a layer whose outputs are dequantised, the multipliers
+                // and shifts one whose outputs are requantised for the next int8 layer: each may
+                // be left out (empty) where the chain does not use it (`validate_chain`).
+                let opt = |what, bytes: usize, n: usize| {
+                    if bytes == 0 {
+                        Ok(())
+                    } else {
+                        len(what, bytes, n)
+                    }
+                };
+                opt("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
+                opt("int8 layer multiplier bytes", mult.0.len(), 4 * r)?;
+                opt("int8 layer shift bytes", shift.len(), r)?;
                 let ok_scale = |s: f32| s.is_finite() && s > 0.0;
                 if !ok_scale(in_scale) || !(out_scale.is_finite() && out_scale >= 0.0) {
                     return Err(Error::InvalidModel(
@@ -178,6 +188,32 @@ pub fn validate_chain(layers: &[Layer<'_>], input: usize, output: usize) -> Resu
     let mut width = input;
     for (i, l) in layers.iter().enumerate() {
         l.validate()?;
+        if let Weights::Int8 {
+            w_scale,
+            mult,
+            shift,
+            ..
+        } = l.weights
+        {
+            let r = l.rows as usize;
+            let need = |what, found: usize, expected: usize| {
+                if found == expected {
+                    Ok(())
+                } else {
+                    Err(Error::SizeMismatch {
+                        what,
+                        expected,
+                        found,
+                    })
+                }
+            };
+            if layers.get(i + 1).is_some_and(|n| n.is_int8()) {
+                need("int8 layer multiplier bytes", mult.0.len(), 4 * r)?;
+                need("int8 layer shift bytes", shift.len(), r)?;
+            } else {
+                need("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
+            }
+        }
         if l.cols as usize != width {
             return Err(Error::SizeMismatch {
                 what: "layer inputs",

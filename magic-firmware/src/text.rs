@@ -3,27 +3,26 @@
 //! `magic_core::line::parse_obs` uses `str::parse::<f32>` and `write_result` uses `{:.6}` on
 //! `f64`: on the board those two pull in about 26 KB of flash (the decimal-to-float tables and
 //! the float-to-decimal algorithms), more than half of the 48 KiB budget once the model is in. This
-//! module reads and writes the same text with integer arithmetic and a few exact multiplications:
+//! module reads and writes the same text in integer arithmetic (no soft-float f64 either):
 //!
 //! * [`parse_obs_bytes`] has the contract of `magic_core::line::parse_obs` (same fields, same
 //!   [`LineError`]s, the same accepted number syntax: sign, digits, point, exponent, `inf`,
 //!   `infinity`, `nan` in any case) on raw bytes: no UTF-8 check and ASCII-only trimming, which
-//!   saves another 0.6 KB (a field padded with non-ASCII white space is not a number here). Numbers with at most 19 significant digits and a decimal
-//!   exponent within ±22 (every observation file written by the host) are converted with one
-//!   exact operation and one rounding (f32 when the digits fit in 24 bits and the exponent in
-//!   ±10, otherwise f64 then f32), so they give core's correctly rounded value except, in
-//!   principle, when the f64 result falls exactly on an f32 rounding midpoint. Longer or more
-//!   extreme numbers are converted approximately (last-bit differences).
+//!   saves another 0.6 KB (a field padded with non-ASCII white space is not a number here).
+//!   Numbers are correctly rounded, as core rounds them: up to 7 significant digits with a
+//!   decimal exponent within ±10 by one exact f32 operation, all others (up to 19 significant
+//!   digits are kept; later ones only scale) by multiplying or long-dividing the digits by powers
+//!   of five in 64-bit integers with a sticky bit and rounding once. Dates (`YYYY-MM-DD`) are
+//!   read by [`parse_date_bytes`], in 32-bit integers.
 //! * [`write_result`] prints what `magic_core::line::write_result` prints: variables and residual
 //!   with six decimals, rounded half to even, `NaN`, `inf`, `-inf` and `-0.000000` as Rust
-//!   prints them. For values that come from `f32` (the variables on the board) the scaling of the
-//!   fraction by 10⁶ is exact, so the text is identical; for the f64 residual the last digit can differ in
-//!   rare cases. Magnitudes of 2³² and more (never produced by a valid model) are written in
-//!   exponent form.
+//!   prints them. The board's values are f32 (its residual too) and are formatted exactly, in
+//!   integer arithmetic, so the text is identical. Magnitudes of 2³² and more (never produced by
+//!   a valid model) are written in exponent form.
 
 use core::fmt::{self, Write};
 use magic_core::line::LineError;
-use magic_core::{Inversion, Real};
+use magic_core::Inversion;
 
 /// Largest accepted observation magnitude (as [`magic_core::invert::MAX_ABS_OBS`], in f32).
 const MAX_ABS: f32 = magic_core::invert::MAX_ABS_OBS as f32;
@@ -86,10 +85,7 @@ pub fn parse_record_bytes(line: &[u8], with_date: bool, out: &mut [f32]) -> Resu
             found: 1,
         });
     };
-    let day = core::str::from_utf8(&line[..comma])
-        .ok()
-        .and_then(magic_core::time::parse_date)
-        .ok_or(LineError::BadDate)?;
+    let day = parse_date_bytes(&line[..comma]).ok_or(LineError::BadDate)?;
     parse_obs_bytes(&line[comma + 1..], out).map_err(|e| match e {
         LineError::FieldCount { expected, found } => LineError::FieldCount {
             expected: expected + 1,
@@ -102,11 +98,62 @@ pub fn parse_record_bytes(line: &[u8], with_date: bool, out: &mut [f32]) -> Resu
     Ok(day as f64)
 }
 
+/// `magic_core::time::parse_date` on bytes, in 32-bit integer arithmetic: `YYYY-MM-DD` or
+/// `YYYY.MM.DD` (ASCII white space around it ignored), each field as `i32`/`u32::from_str`
+/// reads it (an optional `+`, or `-` for the year, then digits), a real date of the proleptic
+/// Gregorian calendar. Returns the day number (days since 1970-01-01). Core's version parses
+/// `str`s and divides in 64 bits, which costs about 2.5 KB of flash on the board.
+pub fn parse_date_bytes(b: &[u8]) -> Option<i32> {
+    let &[y0, y1, y2, y3, s1, m0, m1, s2, d0, d1] = b.trim_ascii() else {
+        return None;
+    };
+    if !(s1 == b'-' || s1 == b'.') || s2 != s1 {
+        return None;
+    }
+    let y = int_field(&[y0, y1, y2, y3], true)?;
+    let m = int_field(&[m0, m1], false)?;
+    let d = int_field(&[d0, d1], false)?;
+    let leap = (y % 4 == 0 && y % 100 != 0) || y % 400 == 0;
+    let month_days = match m {
+        1 | 3 | 5 | 7 | 8 | 10 | 12 => 31,
+        4 | 6 | 9 | 11 => 30,
+        2 if leap => 29,
+        2 => 28,
+        _ => return None,
+    };
+    if !(1..=month_days).contains(&d) {
+        return None;
+    }
+    // days_from_civil (H. Hinnant), in i32: years −999..=9999 stay far from overflow.
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let doy = (153 * ((m + 9) % 12) + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    Some(era * 146_097 + doe - 719_468)
+}
+
+/// A field of digits as `i32::from_str` (`signed`) or `u32::from_str` reads it.
+fn int_field(f: &[u8], signed: bool) -> Option<i32> {
+    let (neg, digits) = match f {
+        [b'+', rest @ ..] => (false, rest),
+        [b'-', rest @ ..] if signed => (true, rest),
+        _ => (false, f),
+    };
+    if digits.is_empty() {
+        return None;
+    }
+    let mut v = 0i32;
+    for &c in digits {
+        if !c.is_ascii_digit() {
+            return None;
+        }
+        v = v * 10 + (c - b'0') as i32;
+    }
+    Some(if neg { -v } else { v })
+}
+
 const POW10_F32: [f32; 11] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10];
-const POW10_F64: [f64; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
-    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
-];
 
 /// Parses a number in the syntax `str::parse::<f32>` accepts; `None` when it is not one.
 #[cfg(test)]
@@ -208,49 +255,166 @@ pub fn parse_f32_bytes(b: &[u8]) -> Option<f32> {
         } else {
             m * p
         }
-    } else if mant <= 1 << 53 && (-22..=22).contains(&exp10) {
-        let m = mant as f64;
-        let p = POW10_F64
-            .get(exp10.unsigned_abs() as usize)
-            .copied()
-            .unwrap_or(1.0);
-        (if exp10 < 0 { m / p } else { m * p }) as f32
     } else {
-        scale_pow10(mant as f64, exp10) as f32
+        decimal_to_f32(mant, exp10)
     };
     Some(if neg { -v } else { v })
 }
 
-/// `m · 10^e` by steps of 10²², for the rare numbers outside the exact paths.
-fn scale_pow10(mut m: f64, mut e: i32) -> f64 {
-    while e > 22 && m.is_finite() {
-        m *= 1e22;
-        e -= 22;
+/// Powers of five that fit in 64 bits: 5⁰ ..= 5²⁷.
+const POW5: [u64; 28] = {
+    let mut p = [1u64; 28];
+    let mut i = 1;
+    while i < 28 {
+        p[i] = p[i - 1] * 5;
+        i += 1;
     }
-    while e < -22 && m != 0.0 {
-        m /= 1e22;
-        e += 22;
+    p
+};
+
+/// `mant · 10^e10` (mant > 0) correctly rounded to f32, in integer arithmetic: `10^e = 5^e · 2^e`;
+/// a positive exponent multiplies by `5^e` (keeping the top 64 bits of the product and a sticky
+/// bit), a negative one divides by `5^|e|` by binary long division (27 powers at a time), then
+/// [`round_to_f32`] rounds once, half to even.
+fn decimal_to_f32(mant: u64, e10: i32) -> f32 {
+    if e10 > 38 {
+        return f32::INFINITY; // mant ≥ 1: at least 10³⁹
     }
-    let p = POW10_F64[e.unsigned_abs().min(22) as usize];
-    if e < 0 {
-        m / p
+    if e10 >= 0 {
+        let (mut q, mut e2, mut sticky) = (mant, e10, false);
+        let mut k = e10 as usize;
+        while k > 0 {
+            let kk = k.min(27);
+            let (hi, lo) = mul_wide(q, POW5.get(kk).copied().unwrap_or(1));
+            if hi == 0 {
+                q = lo;
+            } else {
+                let z = hi.leading_zeros();
+                q = if z == 0 {
+                    hi
+                } else {
+                    (hi << z) | (lo >> (64 - z))
+                };
+                sticky |= (lo << z) != 0;
+                e2 += 64 - z as i32;
+            }
+            k -= kk;
+        }
+        return round_to_f32(q, e2, sticky);
+    }
+    let (mut q, mut e2, mut sticky) = (mant, 0i32, false);
+    let mut k = e10.unsigned_abs() as usize;
+    // Below 10⁻⁷⁰ every input of at most 19 digits is far below the smallest f32.
+    if k > 70 {
+        return 0.0;
+    }
+    while k > 0 {
+        let kk = k.min(27);
+        let d = POW5.get(kk).copied().unwrap_or(1);
+        // The last division needs 26 quotient bits (24, a rounding bit, and one spare); an
+        // intermediate one keeps all 64.
+        let bits = if k == kk { 26 } else { 64 };
+        let z = q.leading_zeros();
+        let (nq, c, st) = div_bits(q << z, d, bits);
+        // q · 2^−z / 5^kk = (nq + frac) · 2^(64 − c − z), and 10^−kk brings 2^−kk.
+        e2 += 64 - c as i32 - z as i32 - kk as i32;
+        q = nq;
+        sticky |= st;
+        k -= kk;
+    }
+    round_to_f32(q, e2, sticky)
+}
+
+/// The 128-bit product `a · b` as (high, low) 64-bit words, from 32-bit limbs (no 128-bit
+/// multiplication routine).
+fn mul_wide(a: u64, b: u64) -> (u64, u64) {
+    let (a0, a1, b0, b1) = (a & 0xFFFF_FFFF, a >> 32, b & 0xFFFF_FFFF, b >> 32);
+    let (p00, p01, p10, p11) = (a0 * b0, a0 * b1, a1 * b0, a1 * b1);
+    let mid = (p00 >> 32) + (p01 & 0xFFFF_FFFF) + (p10 & 0xFFFF_FFFF);
+    let lo = (p00 & 0xFFFF_FFFF) | (mid << 32);
+    let hi = p11 + (p01 >> 32) + (p10 >> 32) + (mid >> 32);
+    (hi, lo)
+}
+
+/// `m / d` for `m ≥ 2⁶³` and `d < 2⁶³`, by binary long division over the bits of `m`, until
+/// the quotient has `bits` bits: returns the quotient `q`, the number `c` of dividend bits
+/// consumed (`m / d = (q + f) · 2^(64 − c)`, 0 ≤ f < 1) and whether `f > 0`.
+fn div_bits(m: u64, d: u64, bits: u32) -> (u64, u32, bool) {
+    // The first (bit length of d) − 1 bits of m are below d: no quotient bit.
+    let c0 = 63 - d.leading_zeros();
+    let (mut c, mut r, mut q) = (c0, if c0 == 0 { 0 } else { m >> (64 - c0) }, 0u64);
+    while q < 1 << (bits - 1) && c < 200 {
+        c += 1;
+        let bit = if c <= 64 { (m >> (64 - c)) & 1 } else { 0 };
+        r = (r << 1) | bit;
+        q <<= 1;
+        if r >= d {
+            r -= d;
+            q |= 1;
+        }
+    }
+    let low = if c < 64 {
+        m & ((1u64 << (64 - c)) - 1)
     } else {
-        m * p
+        0
+    };
+    (q, c, r != 0 || low != 0)
+}
+
+/// `(q + f) · 2^e2` (q > 0; `sticky` when the fraction f > 0) rounded to the nearest f32, ties
+/// to even, subnormals included; `q` must carry at least 26 bits when `sticky`.
+fn round_to_f32(q: u64, e2: i32, sticky: bool) -> f32 {
+    let n = 64 - q.leading_zeros() as i32; // bit length of q
+                                           // Bits of q below the f32's last place: 24 significant bits, or fewer near 2^−149.
+    let sh = (n - 24).max(-149 - e2);
+    let (mut m, exp) = if sh <= 0 {
+        (q << (-sh).min(63), e2 + sh)
+    } else if sh > 64 {
+        (0, e2 + sh)
+    } else {
+        let m = if sh == 64 { 0 } else { q >> sh };
+        let rem = if sh == 64 { q } else { q & ((1u64 << sh) - 1) };
+        let half = 1u64 << (sh - 1);
+        let up = rem > half || (rem == half && (sticky || m & 1 == 1));
+        (m + up as u64, e2 + sh)
+    };
+    // The value is m · 2^exp with m < 2^25; renormalise a carry out of 24 bits.
+    let mut exp = exp;
+    if m == 1 << 24 {
+        m >>= 1;
+        exp += 1;
+    }
+    if m == 0 {
+        return 0.0;
+    }
+    // Normal: m ∈ [2²³, 2²⁴), biased exponent exp + 150; subnormal: exp = −149, m < 2²³.
+    let biased = exp + 150;
+    if biased >= 255 {
+        f32::INFINITY
+    } else if m < 1 << 23 {
+        f32::from_bits(m as u32)
+    } else {
+        f32::from_bits(((biased as u32) << 23) | (m as u32 & 0x7F_FFFF))
     }
 }
 
-/// Writes the result row of an inversion (no newline), as `magic_core::line::write_result`.
-pub fn write_result<R: Real, W: Write>(w: &mut W, inv: &Inversion<R>) -> fmt::Result {
-    for p in inv.params.iter().take(inv.n_params) {
-        write_fixed6(w, p.value())?;
+/// Writes the result row of an inversion (no newline), as `magic_core::line::write_result`
+/// prints it. The board's inversion is in f32, its residual too (stored as f64, converted back
+/// exactly), so everything is printed by [`write_fixed6`] from f32.
+pub fn write_result<W: Write>(w: &mut W, inv: &Inversion<f32>) -> fmt::Result {
+    for &p in inv.params.iter().take(inv.n_params) {
+        write_fixed6(w, p)?;
         w.write_char(',')?;
     }
-    write_fixed6(w, inv.residual_rms)?;
+    write_fixed6(w, inv.residual_rms as f32)?;
     write!(w, ",{},{}", inv.flags.0, inv.used)
 }
 
-/// Writes `v` as `format!("{v:.6}")` does (see the module documentation for the limits).
-pub fn write_fixed6<W: Write>(w: &mut W, v: f64) -> fmt::Result {
+/// Writes `v` as `format!("{v:.6}")` does, exactly, in integer arithmetic (no soft-float f64 on
+/// the board). `v = m · 2^e` with a 24-bit `m`: the integer part is `m` shifted, the fraction's
+/// 10⁶-multiple `⌊(m mod 2^−e) · 10⁶ / 2^−e⌉` (half to even) fits in 64 bits. Magnitudes of 2³²
+/// and more (never produced by a valid model) are written in exponent form (not Rust's output).
+pub fn write_fixed6<W: Write>(w: &mut W, v: f32) -> fmt::Result {
     if v.is_nan() {
         return w.write_str("NaN");
     }
@@ -260,23 +424,36 @@ pub fn write_fixed6<W: Write>(w: &mut W, v: f64) -> fmt::Result {
         return write!(w, "{sign}inf");
     }
     if a < 4_294_967_296.0 {
-        // Integer and fractional parts are exact in f64; scaling the fraction by 10^6 is exact
-        // when `v` came from an f32 (at most 24 + 20 significant bits).
-        let ip = a as u32;
-        let s = (a - ip as f64) * 1e6;
-        let mut q = s as u32;
-        let rest = s - q as f64;
-        // Round half to even on the last printed digit (the parity of q).
-        if rest > 0.5 || (rest == 0.5 && q & 1 == 1) {
-            q += 1;
-        }
-        let (ip, q) = if q == 1_000_000 {
-            (ip as u64 + 1, 0)
+        let bits = a.to_bits();
+        let (biased, frac) = (bits >> 23, bits & 0x7F_FFFF);
+        let (m, e) = if biased == 0 {
+            (frac, -149)
         } else {
-            (ip as u64, q)
+            (frac | 0x80_0000, biased as i32 - 150)
         };
-        if ip <= u32::MAX as u64 {
-            return write!(w, "{sign}{}.{q:06}", ip as u32);
+        let (mut ip, mut q) = if e >= 0 {
+            ((m as u64) << e, 0u64)
+        } else {
+            let s = e.unsigned_abs();
+            // Beyond 44 bits of shift the fraction · 10⁶ (< 2^44) is below half a unit: 0.
+            if s > 44 {
+                (0, 0)
+            } else {
+                let ip = if s >= 32 { 0 } else { (m >> s) as u64 };
+                let f = (m as u64 & ((1u64 << s) - 1)) * 1_000_000;
+                let (mut q, r, half) = (f >> s, f & ((1u64 << s) - 1), 1u64 << (s - 1));
+                if r > half || (r == half && q & 1 == 1) {
+                    q += 1;
+                }
+                (ip, q)
+            }
+        };
+        if q == 1_000_000 {
+            ip += 1;
+            q = 0;
+        }
+        if let Ok(ip) = u32::try_from(ip) {
+            return write!(w, "{sign}{ip}.{:06}", q as u32);
         }
     }
     // Exponent form d.dddddde<k> (not Rust's output; unreachable for valid models).
@@ -293,9 +470,63 @@ pub fn write_fixed6<W: Write>(w: &mut W, v: f64) -> fmt::Result {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dates_as_core_parses_them() {
+        let check = |t: &str| {
+            let want = magic_core::time::parse_date(t);
+            assert_eq!(parse_date_bytes(t.as_bytes()).map(i64::from), want, "{t:?}");
+        };
+        for y in (-999..=9999)
+            .step_by(7)
+            .chain([0, 1, 1900, 2000, 2004, 2100, 2400])
+        {
+            for m in 0..=13 {
+                for d in 0..=32 {
+                    check(&format!("{y:04}-{m:02}-{d:02}"));
+                }
+            }
+        }
+        for y in 1890..=2110 {
+            for (m, d) in [
+                (2, 28),
+                (2, 29),
+                (2, 30),
+                (12, 31),
+                (1, 1),
+                (4, 31),
+                (6, 30),
+            ] {
+                check(&format!("{y:04}.{m:02}.{d:02}"));
+            }
+        }
+        for t in [
+            "2006-01-02",
+            " 2006-01-02\t",
+            "+999-01-01",
+            "-999-01-01",
+            "2006-+1-01",
+            "2006-01-+1",
+            "2006--1-01",
+            "2006-1-012",
+            "2006-01.02",
+            "2006/01/02",
+            "20060102",
+            "2006-01-0x",
+            "",
+            "-",
+            "2006-01-02,",
+            "+-99-01-01",
+            "-+99-01-01",
+            "0000-02-29",
+            "0100-02-29",
+        ] {
+            check(t);
+        }
+    }
     use std::string::String;
 
-    fn fixed(v: f64) -> String {
+    fn fixed(v: f32) -> String {
         let mut s = String::new();
         write_fixed6(&mut s, v).unwrap();
         s
@@ -364,21 +595,48 @@ mod tests {
     }
 
     #[test]
-    fn far_exponents_are_within_one_ulp() {
-        // Outside the exact paths (exponent beyond ±22 from the digits) the value may be one ulp
-        // off core's correctly rounded one.
+    fn far_exponents_parse_exactly() {
         for s in [
             "7.038531e-26",
             "0.00000000000000000000000007038531",
             "1.17549435e-38",
+            "1e-45",
+            "7e-46",
+            "1.4e-45",
             "3.4e37",
             "2.2e-30",
+            "3.4028235e38",
+            "3.4028236e38",
+            "1e38",
+            "9999999999999999999e19",
         ] {
             let (want, got) = (s.parse::<f32>().unwrap(), parse_f32(s).unwrap());
-            assert!(
-                want.to_bits().abs_diff(got.to_bits()) <= 1,
-                "{s}: {want:e} vs {got:e}"
-            );
+            assert_eq!(want.to_bits(), got.to_bits(), "{s}: {want:e} vs {got:e}");
+        }
+    }
+
+    #[test]
+    fn random_decimals_parse_exactly() {
+        // Up to 19 significant digits, decimal exponents from −70 to +40: every result is core's
+        // correctly rounded one (integer arithmetic, one rounding).
+        let mut x = 0x0DDB_A11Cu64;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..300_000 {
+            let digits = 1 + next() % 19;
+            let mut m = std::string::String::new();
+            for _ in 0..digits {
+                m.push((b'0' + (next() % 10) as u8) as char);
+            }
+            let e = (next() % 111) as i32 - 70;
+            let text = std::format!("{m}e{e}");
+            let want = text.parse::<f32>().unwrap();
+            let got = parse_f32(&text).unwrap();
+            assert_eq!(want.to_bits(), got.to_bits(), "{text}");
         }
     }
 
@@ -462,7 +720,7 @@ mod tests {
             n_obs: 3,
             physics: [0.0; magic_core::model_file::MAX_OBS],
             recon: [0.0; magic_core::model_file::MAX_OBS],
-            residual_rms: 1.234_567_890_123,
+            residual_rms: 1.234_567_9f32 as f64,
             residual_rms_std: 0.5,
             flags: Flags(5),
             used: 0xFFF,
@@ -513,48 +771,49 @@ mod tests {
     #[test]
     fn fixed6_matches_core_formatting() {
         let specials = [
-            0.0,
+            0.0f32,
             -0.0,
             0.0078125,
             0.0234375,
             -0.0000001,
             2.5e-7,
             5e-7,
+            4.9999997e-7,
+            5.0000004e-7,
+            1.5e-6,
+            2.5e-6,
             4e9,
-            4294967295.25,
+            4294967000.0,
             0.9999995,
             1.9999996,
-            f64::NAN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
+            f32::MIN_POSITIVE,
+            1e-45,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
             -3.25,
             1.0 / 3.0,
         ];
         for v in specials {
-            assert_eq!(fixed(v), std::format!("{v:.6}"), "{v:e}");
+            assert_eq!(fixed(v), std::format!("{:.6}", v as f64), "{v:e}");
         }
-        // f64 values in general: scaling the fraction by 10^6 rounds, so a value within an ulp of
-        // a decimal tie can come out one unit off in the sixth decimal.
-        let last_digit = |t: &str| -> i64 { t.replace('.', "").parse().unwrap() };
-        let mut y = 0x0BAD_F00Du64;
-        for _ in 0..300_000 {
-            y ^= y << 13;
-            y ^= y >> 7;
-            y ^= y << 17;
-            let v = (y >> 11) as f64 / (1u64 << 53) as f64 * 2e4 - 1e4;
-            let (a, b) = (fixed(v), std::format!("{v:.6}"));
-            assert!((last_digit(&a) - last_digit(&b)).abs() <= 1, "{a} vs {b}");
-        }
-        // All values of f32 origin (the variables on the board) print identically.
+        // Every value below 2^32 prints as Rust prints its exact (f64) value.
         let mut x = 0xDEAD_BEEFu32;
-        for _ in 0..300_000 {
+        for _ in 0..1_000_000 {
             x ^= x << 13;
             x ^= x >> 17;
             x ^= x << 5;
             let v = f32::from_bits(x);
             if v.is_finite() && v.abs() < 4e9 {
-                let v = v as f64;
+                assert_eq!(fixed(v), std::format!("{:.6}", v as f64), "{v:e}");
                 assert_eq!(fixed(v), std::format!("{v:.6}"), "{v:e}");
+            }
+        }
+        // Values near ties at the sixth decimal (k/10⁶ ± half a unit, in f32).
+        for k in 0..200_000u32 {
+            let t = (k as f64 + 0.5) / 1e6;
+            for v in [t as f32, f32::from_bits((t as f32).to_bits() + 1)] {
+                assert_eq!(fixed(v), std::format!("{:.6}", v as f64), "{v:e}");
             }
         }
     }

@@ -108,10 +108,29 @@ impl OwnedEffect {
         match *self {
             OwnedEffect::CommonMode => Effect::CommonMode,
             OwnedEffect::Elevation { z_ref_km } => Effect::Elevation { z_ref_km },
-            OwnedEffect::SecondSource { x_km, y_km, depth_km } => Effect::SecondSource { x_km, y_km, depth_km },
+            OwnedEffect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            } => Effect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            },
             OwnedEffect::Seasonal { .. } => Effect::Seasonal { coef: LeF32(bytes) },
-            OwnedEffect::Step { station, epoch_day, offset_mm } => Effect::Step { station, epoch_day, offset_mm },
-            OwnedEffect::Drift { t0_day, .. } => Effect::Drift { t0_day, rate: LeF32(bytes) },
+            OwnedEffect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            } => Effect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            },
+            OwnedEffect::Drift { t0_day, .. } => Effect::Drift {
+                t0_day,
+                rate: LeF32(bytes),
+            },
         }
     }
 
@@ -120,10 +139,31 @@ impl OwnedEffect {
         match *e {
             Effect::CommonMode => OwnedEffect::CommonMode,
             Effect::Elevation { z_ref_km } => OwnedEffect::Elevation { z_ref_km },
-            Effect::SecondSource { x_km, y_km, depth_km } => OwnedEffect::SecondSource { x_km, y_km, depth_km },
-            Effect::Seasonal { coef } => OwnedEffect::Seasonal { coef: coef.iter().collect() },
-            Effect::Step { station, epoch_day, offset_mm } => OwnedEffect::Step { station, epoch_day, offset_mm },
-            Effect::Drift { t0_day, rate } => OwnedEffect::Drift { t0_day, rate: rate.iter().collect() },
+            Effect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            } => OwnedEffect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            },
+            Effect::Seasonal { coef } => OwnedEffect::Seasonal {
+                coef: coef.iter().collect(),
+            },
+            Effect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            } => OwnedEffect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            },
+            Effect::Drift { t0_day, rate } => OwnedEffect::Drift {
+                t0_day,
+                rate: rate.iter().collect(),
+            },
         }
     }
 
@@ -182,8 +222,23 @@ struct LayerBytes {
 
 fn layer_bytes(l: &OwnedLayer) -> LayerBytes {
     match &l.weights {
-        OwnedWeights::F32 { w, b } => LayerBytes { int8: false, pad: 0, a: f32_bytes(w), b: f32_bytes(b), c: vec![], d: vec![], e: vec![] },
-        OwnedWeights::Int8 { w, bias, w_scale, mult, shift, .. } => LayerBytes {
+        OwnedWeights::F32 { w, b } => LayerBytes {
+            int8: false,
+            pad: 0,
+            a: f32_bytes(w),
+            b: f32_bytes(b),
+            c: vec![],
+            d: vec![],
+            e: vec![],
+        },
+        OwnedWeights::Int8 {
+            w,
+            bias,
+            w_scale,
+            mult,
+            shift,
+            ..
+        } => LayerBytes {
             int8: true,
             pad: 0,
             // The model file's blocked layout (magic_core::quant::blocked_index); a weight count
@@ -206,8 +261,15 @@ fn layer_bytes(l: &OwnedLayer) -> LayerBytes {
 
 fn borrow_layer<'a>(l: &OwnedLayer, b: &'a LayerBytes) -> Layer<'a> {
     let weights = match &l.weights {
-        OwnedWeights::F32 { .. } => Weights::F32 { w: LeF32(&b.a), bias: LeF32(&b.b) },
-        OwnedWeights::Int8 { in_scale, out_scale, .. } => Weights::Int8 {
+        OwnedWeights::F32 { .. } => Weights::F32 {
+            w: LeF32(&b.a),
+            bias: LeF32(&b.b),
+        },
+        OwnedWeights::Int8 {
+            in_scale,
+            out_scale,
+            ..
+        } => Weights::Int8 {
             pad: &[0u8; 3][..b.pad.min(3)],
             w: &b.a,
             bias: LeI32(&b.b),
@@ -218,13 +280,19 @@ fn borrow_layer<'a>(l: &OwnedLayer, b: &'a LayerBytes) -> Layer<'a> {
             out_scale: *out_scale,
         },
     };
-    Layer { rows: l.rows as u16, cols: l.cols as u16, act: l.act, weights }
+    Layer {
+        rows: l.rows as u16,
+        cols: l.cols as u16,
+        act: l.act,
+        weights,
+    }
 }
 
 /// Offsets from the start of `bytes` (an encoded model) of every int8 layer's weights, encoder
 /// first, in file order.
 fn int8_weight_offsets(bytes: &[u8]) -> Result<Vec<usize>> {
-    let m = Model::decode(bytes).map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
+    let m = Model::decode(bytes)
+        .map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
     let start = bytes.as_ptr() as usize;
     Ok(m.encoder
         .iter()
@@ -243,12 +311,33 @@ impl OwnedModel {
     pub fn encode(&self) -> Result<Vec<u8>> {
         let mut enc_b: Vec<LayerBytes> = self.encoder.iter().map(layer_bytes).collect();
         let mut dec_b: Vec<LayerBytes> = self.decoder.iter().map(layer_bytes).collect();
+        // An int8 layer feeding an int8 layer needs its multipliers and shifts, one whose outputs
+        // are dequantised its weight scales: the other arrays are left out (1.2 KB of the
+        // board's 20 KB model).
+        for bytes in [&mut enc_b, &mut dec_b] {
+            let int8: Vec<bool> = bytes.iter().map(|b| b.int8).collect();
+            for (i, b) in bytes.iter_mut().enumerate() {
+                if b.int8 {
+                    if int8.get(i + 1).copied().unwrap_or(false) {
+                        b.c.clear();
+                    } else {
+                        b.d.clear();
+                        b.e.clear();
+                    }
+                }
+            }
+        }
         let first = self.encode_bytes(&enc_b, &dec_b)?;
         let offsets = int8_weight_offsets(&first)?;
         // A padding's length prefix is one byte whatever its length (0–3): each padding shifts
         // only what follows it, by its length.
         let mut shift = 0;
-        for (b, off) in enc_b.iter_mut().chain(dec_b.iter_mut()).filter(|b| b.int8).zip(&offsets) {
+        for (b, off) in enc_b
+            .iter_mut()
+            .chain(dec_b.iter_mut())
+            .filter(|b| b.int8)
+            .zip(&offsets)
+        {
             b.pad = (4 - (off + shift) % 4) % 4;
             shift += b.pad;
         }
@@ -264,20 +353,28 @@ impl OwnedModel {
         let scale = f32_bytes(&self.scale);
         let mut encoder = heapless::Vec::new();
         for (l, b) in self.encoder.iter().zip(enc_b) {
-            encoder.push(borrow_layer(l, b)).map_err(|_| anyhow::anyhow!("too many encoder layers"))?;
+            encoder
+                .push(borrow_layer(l, b))
+                .map_err(|_| anyhow::anyhow!("too many encoder layers"))?;
         }
         let mut decoder = heapless::Vec::new();
         for (l, b) in self.decoder.iter().zip(dec_b) {
-            decoder.push(borrow_layer(l, b)).map_err(|_| anyhow::anyhow!("too many decoder layers"))?;
+            decoder
+                .push(borrow_layer(l, b))
+                .map_err(|_| anyhow::anyhow!("too many decoder layers"))?;
         }
         let mut bounds = heapless::Vec::new();
         for b in &self.bounds {
-            bounds.push(*b).map_err(|_| anyhow::anyhow!("too many variables"))?;
+            bounds
+                .push(*b)
+                .map_err(|_| anyhow::anyhow!("too many variables"))?;
         }
         let eff_b: Vec<Vec<u8>> = self.effects.iter().map(OwnedEffect::bytes).collect();
         let mut effects = heapless::Vec::new();
         for (e, b) in self.effects.iter().zip(&eff_b) {
-            effects.push(e.borrow(b)).map_err(|_| anyhow::anyhow!("too many effects"))?;
+            effects
+                .push(e.borrow(b))
+                .map_err(|_| anyhow::anyhow!("too many effects"))?;
         }
         let model = Model {
             effects,
@@ -290,10 +387,24 @@ impl OwnedModel {
             decoder,
             residual_threshold: self.residual_threshold,
         };
-        let mut buf = vec![0u8; 64 * 1024 + crate::data::rtm_tables::problem_bytes(&self.problem) + 8 * mean.len() + eff_b.iter().map(Vec::len).sum::<usize>() + enc_b.iter().chain(dec_b).map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64).sum::<usize>()];
-        let n = model.encode(&mut buf).map_err(|e| anyhow::anyhow!("encoding the model: {e}"))?;
+        let mut buf = vec![
+            0u8;
+            64 * 1024
+                + crate::data::rtm_tables::problem_bytes(&self.problem)
+                + 8 * mean.len()
+                + eff_b.iter().map(Vec::len).sum::<usize>()
+                + enc_b
+                    .iter()
+                    .chain(dec_b)
+                    .map(|b| b.a.len() + b.b.len() + b.c.len() + b.d.len() + b.e.len() + 64)
+                    .sum::<usize>()
+        ];
+        let n = model
+            .encode(&mut buf)
+            .map_err(|e| anyhow::anyhow!("encoding the model: {e}"))?;
         buf.truncate(n);
-        Model::decode(&buf).map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
+        Model::decode(&buf)
+            .map_err(|e| anyhow::anyhow!("the encoded model does not validate: {e}"))?;
         Ok(buf)
     }
 
@@ -301,8 +412,20 @@ impl OwnedModel {
     pub fn from_model(m: &Model<'_>) -> OwnedModel {
         let own = |l: &Layer<'_>| {
             let weights = match l.weights {
-                Weights::F32 { w, bias } => OwnedWeights::F32 { w: w.iter().collect(), b: bias.iter().collect() },
-                Weights::Int8 { w, bias, w_scale, mult, shift, in_scale, out_scale, .. } => OwnedWeights::Int8 {
+                Weights::F32 { w, bias } => OwnedWeights::F32 {
+                    w: w.iter().collect(),
+                    b: bias.iter().collect(),
+                },
+                Weights::Int8 {
+                    w,
+                    bias,
+                    w_scale,
+                    mult,
+                    shift,
+                    in_scale,
+                    out_scale,
+                    ..
+                } => OwnedWeights::Int8 {
                     w: {
                         let (r, c) = (l.rows as usize, l.cols as usize);
                         let mut row_major = vec![0u8; w.len()];
@@ -319,7 +442,12 @@ impl OwnedModel {
                     out_scale,
                 },
             };
-            OwnedLayer { rows: l.rows as usize, cols: l.cols as usize, act: l.act, weights }
+            OwnedLayer {
+                rows: l.rows as usize,
+                cols: l.cols as usize,
+                act: l.act,
+                weights,
+            }
         };
         OwnedModel {
             variant: m.variant,
@@ -335,7 +463,11 @@ impl OwnedModel {
     }
 
     /// Builds the f32 model of a trained network (with the effects its physics declares).
-    pub fn from_net(net: &Net, problem: Problem<'static>, effects: Vec<OwnedEffect>) -> Result<OwnedModel> {
+    pub fn from_net(
+        net: &Net,
+        problem: Problem<'static>,
+        effects: Vec<OwnedEffect>,
+    ) -> Result<OwnedModel> {
         let layers = |m: &Mlp| -> Result<Vec<OwnedLayer>> {
             m.layers
                 .iter()
@@ -356,7 +488,11 @@ impl OwnedModel {
             problem,
             mean: net.mean.iter().map(|v| *v as f32).collect(),
             scale: net.scale.iter().map(|v| *v as f32).collect(),
-            bounds: net.bounds.iter().map(|b| [b[0] as f32, b[1] as f32]).collect(),
+            bounds: net
+                .bounds
+                .iter()
+                .map(|b| [b[0] as f32, b[1] as f32])
+                .collect(),
             encoder: layers(&net.encoder)?,
             decoder: match &net.decoder {
                 Some(d) => layers(d)?,
@@ -385,7 +521,11 @@ impl OwnedModel {
         let enc_max = max_abs_inputs(&self.encoder, calib)?;
         let keep_f32_last = matches!(self.variant, Variant::B | Variant::C);
         let n_enc = self.encoder.len();
-        out.encoder = quantize_chain(&self.encoder, &enc_max, if keep_f32_last { n_enc - 1 } else { n_enc })?;
+        out.encoder = quantize_chain(
+            &self.encoder,
+            &enc_max,
+            if keep_f32_last { n_enc - 1 } else { n_enc },
+        )?;
         if !self.decoder.is_empty() {
             // Decoder inputs: what the f32 model feeds it.
             let dec_in = self.decoder_inputs(calib, days)?;
@@ -403,12 +543,22 @@ impl OwnedModel {
         let mut ws = magic_core::Workspace::default();
         let mut out = Vec::with_capacity(x.len());
         for (i, row) in x.iter().enumerate() {
-            let obs: Vec<f32> = row.iter().enumerate().map(|(c, v)| v * self.scale[c] + self.mean[c]).collect();
+            let obs: Vec<f32> = row
+                .iter()
+                .enumerate()
+                .map(|(c, v)| v * self.scale[c] + self.mean[c])
+                .collect();
             let t = days.get(i).copied().unwrap_or(f64::NAN);
-            let inv = magic_core::invert_at::<f64>(&model, &obs, t, &mut ws).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let inv = magic_core::invert_at::<f64>(&model, &obs, t, &mut ws)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
             out.push(match self.variant {
-                Variant::A => inv.params[..inv.n_params].iter().map(|v| *v as f32).collect(),
-                _ => (0..inv.n_obs).map(|c| ((inv.physics[c] - self.mean[c] as f64) / self.scale[c] as f64) as f32).collect(),
+                Variant::A => inv.params[..inv.n_params]
+                    .iter()
+                    .map(|v| *v as f32)
+                    .collect(),
+                _ => (0..inv.n_obs)
+                    .map(|c| ((inv.physics[c] - self.mean[c] as f64) / self.scale[c] as f64) as f32)
+                    .collect(),
             });
         }
         Ok(out)
@@ -416,7 +566,9 @@ impl OwnedModel {
 }
 
 fn f32_forward(l: &OwnedLayer, x: &[f32]) -> Vec<f32> {
-    let OwnedWeights::F32 { w, b } = &l.weights else { return vec![] };
+    let OwnedWeights::F32 { w, b } = &l.weights else {
+        return vec![];
+    };
     (0..l.rows)
         .map(|r| {
             let mut acc = b[r];
@@ -442,7 +594,9 @@ fn max_abs_inputs(layers: &[OwnedLayer], data: &[Vec<f32>]) -> Result<Vec<f32>> 
             h = f32_forward(l, &h);
         }
     }
-    Ok(m.into_iter().map(|v| if v > 0.0 { v } else { 1.0 }).collect())
+    Ok(m.into_iter()
+        .map(|v| if v > 0.0 { v } else { 1.0 })
+        .collect())
 }
 
 fn quantize_chain(layers: &[OwnedLayer], max_in: &[f32], n_int8: usize) -> Result<Vec<OwnedLayer>> {
@@ -452,21 +606,35 @@ fn quantize_chain(layers: &[OwnedLayer], max_in: &[f32], n_int8: usize) -> Resul
             out.push(l.clone());
             continue;
         }
-        let OwnedWeights::F32 { w, b } = &l.weights else { bail!("layer {i} is already quantised") };
+        let OwnedWeights::F32 { w, b } = &l.weights else {
+            bail!("layer {i} is already quantised")
+        };
         let in_scale = max_in[i] / 127.0;
-        let out_scale = if i + 1 < n_int8 { max_in[i + 1] / 127.0 } else { 0.0 };
+        let out_scale = if i + 1 < n_int8 {
+            max_in[i + 1] / 127.0
+        } else {
+            0.0
+        };
         let mut qw = Vec::with_capacity(w.len());
         let (mut bias, mut w_scale, mut mult, mut shift) = (vec![], vec![], vec![], vec![]);
         for r in 0..l.rows {
             let row = &w[r * l.cols..(r + 1) * l.cols];
             let mx = row.iter().fold(0f32, |a, v| a.max(v.abs()));
             let s = if mx > 0.0 { mx / 127.0 } else { 1e-8 };
-            qw.extend(row.iter().map(|v| (v / s).round().clamp(-127.0, 127.0) as i8));
+            qw.extend(
+                row.iter()
+                    .map(|v| (v / s).round().clamp(-127.0, 127.0) as i8),
+            );
             let acc_scale = s as f64 * in_scale as f64;
-            bias.push((b[r] as f64 / acc_scale).round().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
+            bias.push(
+                (b[r] as f64 / acc_scale)
+                    .round()
+                    .clamp(i32::MIN as f64, i32::MAX as f64) as i32,
+            );
             w_scale.push(s);
             let (m, sh) = if out_scale > 0.0 {
-                quantize_multiplier(acc_scale / out_scale as f64).context("requantisation multiplier out of range")?
+                quantize_multiplier(acc_scale / out_scale as f64)
+                    .context("requantisation multiplier out of range")?
             } else {
                 (1 << 30, 0)
             };
@@ -477,7 +645,15 @@ fn quantize_chain(layers: &[OwnedLayer], max_in: &[f32], n_int8: usize) -> Resul
             rows: l.rows,
             cols: l.cols,
             act: l.act,
-            weights: OwnedWeights::Int8 { w: qw, bias, w_scale, mult, shift, in_scale, out_scale },
+            weights: OwnedWeights::Int8 {
+                w: qw,
+                bias,
+                w_scale,
+                mult,
+                shift,
+                in_scale,
+                out_scale,
+            },
         });
     }
     Ok(out)
