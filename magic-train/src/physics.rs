@@ -101,7 +101,11 @@ impl JacobianReuse {
     /// pass computes them, and the next forward passes compute them ahead.
     fn take(&self, op: usize, input: &[f64]) -> Option<Vec<f64>> {
         let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
-        let found = pending.iter().position(|p| p.op == op && p.input == input);
+        // Bit for bit: unknown day numbers are NaN.
+        let same = |a: &[f64]| {
+            a.len() == input.len() && a.iter().zip(input).all(|(x, y)| x.to_bits() == y.to_bits())
+        };
+        let found = pending.iter().position(|p| p.op == op && same(&p.input));
         match found {
             Some(i) => Some(pending.swap_remove(i).jac),
             None => {
@@ -356,5 +360,97 @@ mod tests {
                 g[j]
             );
         }
+    }
+
+    /// `y = (p0·p1, p0 + p1)`, counting how many rows each method evaluated.
+    #[derive(Default)]
+    struct Counting {
+        forwards: std::sync::atomic::AtomicUsize,
+        jacobians: std::sync::atomic::AtomicUsize,
+        reuse: JacobianReuse,
+    }
+
+    impl Physics for Counting {
+        fn n_params(&self) -> usize {
+            2
+        }
+        fn n_obs(&self) -> usize {
+            2
+        }
+        fn forward(&self, p: &[f64], _t: f64, out: &mut [f64]) -> Result<(), magic_core::Error> {
+            self.forwards.fetch_add(1, Ordering::Relaxed);
+            out.copy_from_slice(&[p[0] * p[1], p[0] + p[1]]);
+            Ok(())
+        }
+        fn jacobian(
+            &self,
+            p: &[f64],
+            t: f64,
+            out: &mut [f64],
+            jac: &mut [f64],
+        ) -> Result<(), magic_core::Error> {
+            self.jacobians.fetch_add(1, Ordering::Relaxed);
+            self.forwards.fetch_sub(1, Ordering::Relaxed);
+            self.forward(p, t, out)?;
+            jac.copy_from_slice(&[p[1], p[0], 1.0, 1.0]);
+            Ok(())
+        }
+        fn jacobian_reuse(&self) -> Option<&JacobianReuse> {
+            Some(&self.reuse)
+        }
+    }
+
+    #[test]
+    fn training_steps_reuse_the_forward_jacobians() {
+        let phys = Arc::new(Counting::default());
+        let dyn_phys: Arc<dyn Physics> = phys.clone();
+        let dev = Device::Cpu;
+        let z = Var::from_vec(vec![2.0, 3.0, f64::NAN, -1.0, 0.5, f64::NAN], (2, 3), &dev).unwrap();
+        // d/dz Σ y² = 2·y·J: row (2, 3): y = (6, 5) -> (2·6·3 + 2·5, 2·6·2 + 2·5) = (46, 34).
+        let step = || {
+            let y = z
+                .as_tensor()
+                .apply_op1(PhysicsOp(dyn_phys.clone()))
+                .unwrap();
+            let loss = y.sqr().unwrap().sum_all().unwrap();
+            let g = loss.backward().unwrap();
+            let g = g
+                .get(&z)
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f64>()
+                .unwrap();
+            assert_eq!(&g[..2], &[46.0, 34.0]);
+        };
+        let counts = || {
+            (
+                phys.forwards.load(Ordering::Relaxed),
+                phys.jacobians.load(Ordering::Relaxed),
+            )
+        };
+        // The first step: values in the forward pass, Jacobians in the backward pass.
+        step();
+        assert_eq!(counts(), (2, 2));
+        // Later steps compute each row once, Jacobian and values together.
+        step();
+        step();
+        assert_eq!(counts(), (2, 6));
+        // A forward pass without a backward pass (validation) wastes its Jacobians once...
+        z.as_tensor()
+            .apply_op1(PhysicsOp(dyn_phys.clone()))
+            .unwrap();
+        assert_eq!(counts(), (2, 8));
+        // ...after which forward passes compute values only.
+        let y = z
+            .as_tensor()
+            .apply_op1(PhysicsOp(dyn_phys.clone()))
+            .unwrap();
+        assert_eq!(counts(), (4, 8));
+        assert_eq!(y.to_vec2::<f64>().unwrap()[1], vec![-0.5, -0.5]);
+        // Training again: the backward pass finds nothing cached, and the next steps reuse.
+        step();
+        step();
+        assert_eq!(counts(), (6, 12));
     }
 }
