@@ -134,6 +134,34 @@ impl<R: Real> Inversion<R> {
     }
 }
 
+/// The three parts of an inversion pass, for cost measurement ([`Probe`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// The encoder E (inputs copied in and quantised, layers, outputs).
+    Encoder,
+    /// The forward model F with its effects.
+    Forward,
+    /// The correction C (variant C) or the decoder (variant A), after its inputs are standardised.
+    Correction,
+}
+
+/// Observes the parts of an inversion as [`invert_probed`] runs them: `begin` just before and
+/// `end` just after each part of each pass (a day with missing channels makes several passes).
+/// The firmware times the parts with it; `()` observes nothing and costs nothing.
+pub trait Probe {
+    /// A part starts.
+    fn begin(&mut self, part: Part);
+    /// The part ends.
+    fn end(&mut self, part: Part);
+}
+
+impl Probe for () {
+    #[inline(always)]
+    fn begin(&mut self, _: Part) {}
+    #[inline(always)]
+    fn end(&mut self, _: Part) {}
+}
+
 /// [`invert_at_for`] writing into `out` in place (the firmware's path: no ~1 KB result to copy).
 /// On success the first `n_params` / `n_obs` entries of `out`'s arrays are this inversion's; the
 /// entries after them keep what they held. On error `out` holds no valid inversion.
@@ -147,6 +175,18 @@ pub fn invert_into<R: Real, P: Problems>(
     t_day: f64,
     ws: &mut Workspace,
     out: &mut Inversion<R>,
+) -> Result<(), Error> {
+    invert_probed::<R, P, ()>(model, obs, t_day, ws, out, &mut ())
+}
+
+/// [`invert_into`] reporting the start and end of each part to `probe`.
+pub fn invert_probed<R: Real, P: Problems, Q: Probe>(
+    model: &Model<'_>,
+    obs: &[f32],
+    t_day: f64,
+    ws: &mut Workspace,
+    out: &mut Inversion<R>,
+    probe: &mut Q,
 ) -> Result<(), Error> {
     let n_obs = model.n_obs();
     if obs.len() != n_obs || n_obs > MAX_OBS {
@@ -211,7 +251,7 @@ pub fn invert_into<R: Real, P: Problems>(
     }
 
     out.n_obs = n_obs;
-    let mut at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, out)?;
+    let mut at_bound = pass::<R, P, Q>(model, &z[..n_obs], t_day, ws, out, probe)?;
     if observed < n_obs {
         // Missing channels: refill them with the model's own reconstruction and invert again.
         for _ in 0..IMPUTE_PASSES {
@@ -222,7 +262,7 @@ pub fn invert_into<R: Real, P: Problems>(
                     *zi = (R::value(*r) as f32 - mean) / scale;
                 }
             }
-            at_bound = pass::<R, P>(model, &z[..n_obs], t_day, ws, out)?;
+            at_bound = pass::<R, P, Q>(model, &z[..n_obs], t_day, ws, out, probe)?;
         }
     }
     out.n_params = n_params;
@@ -276,17 +316,20 @@ pub const IMPUTE_PASSES: usize = 3;
 /// One encoder → F → C pass on standardised observations, writing `params`, `unit`, `physics`
 /// and `recon` of `out` in place; returns whether a variable sits at its bound. The networks
 /// read their inputs from and leave their outputs in the working memory (no copies).
-fn pass<R: Real, P: Problems>(
+fn pass<R: Real, P: Problems, Q: Probe>(
     model: &Model<'_>,
     z: &[f32],
     t_day: f64,
     ws: &mut Workspace,
     out: &mut Inversion<R>,
+    probe: &mut Q,
 ) -> Result<bool, Error> {
     let n_obs = z.len().min(MAX_OBS);
     let n_params = model.n_params().min(MAX_PARAMS);
     let unit = &mut out.unit[..n_params];
+    probe.begin(Part::Encoder);
     model_encoder(model, z, unit, ws)?;
+    probe.end(Part::Encoder);
     let mut at_bound = false;
     // The variables: the encoder's outputs mapped into their bounds (B, C), or the latent code
     // itself (A). (One loop for both: a plain copy loop is turned into a call of `memmove`,
@@ -306,16 +349,20 @@ fn pass<R: Real, P: Problems>(
             out.physics[..n_obs].fill(R::zero());
             let input = ws.nn.input();
             input[..n_params].copy_from_slice(unit);
+            probe.begin(Part::Correction);
             let y = run_scratch(&model.decoder, n_params, &mut ws.nn)?;
+            probe.end(Part::Correction);
             destandardise(model, y, &mut out.recon[..n_obs])?;
         }
         Variant::B | Variant::C => {
+            probe.begin(Part::Forward);
             forward_for::<R, P>(
                 model,
                 &out.params[..n_params],
                 t_day,
                 &mut out.physics[..n_obs],
             )?;
+            probe.end(Part::Forward);
             if model.variant == Variant::C {
                 let input = ws.nn.input();
                 let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
@@ -323,7 +370,9 @@ fn pass<R: Real, P: Problems>(
                     let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
                     *f = (R::value(*p) as f32 - mean) / scale;
                 }
+                probe.begin(Part::Correction);
                 let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
+                probe.end(Part::Correction);
                 destandardise(model, y, &mut out.recon[..n_obs])?;
             } else {
                 out.recon[..n_obs].copy_from_slice(&out.physics[..n_obs]);

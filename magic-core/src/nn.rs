@@ -496,29 +496,26 @@ pub fn run_scratch<'s>(
                 in_scale,
                 ..
             } => {
-                let short = |what, have: usize, need: usize| {
-                    (have < need).then_some(Error::SizeMismatch {
+                // The byte arrays this layer reads must be whole (checked once per layer).
+                let (what, have, need) = if w.len() < rows * cols {
+                    ("int8 layer weight bytes", w.len(), rows * cols)
+                } else if bias.0.len() < 4 * rows {
+                    ("int8 layer bias bytes", bias.0.len(), 4 * rows)
+                } else if next_int8 && shift.len() < rows {
+                    ("int8 layer shift bytes", shift.len(), rows)
+                } else if next_int8 && mult.0.len() < 4 * rows {
+                    ("int8 layer multiplier bytes", mult.0.len(), 4 * rows)
+                } else if !next_int8 && w_scale.0.len() < 4 * rows {
+                    ("int8 layer scale bytes", w_scale.0.len(), 4 * rows)
+                } else {
+                    ("", 0, 0)
+                };
+                if have < need {
+                    return Err(Error::SizeMismatch {
                         what,
                         expected: need,
                         found: have,
-                    })
-                };
-                let checks = [
-                    short("int8 layer weight bytes", w.len(), rows * cols),
-                    short("int8 layer bias bytes", bias.0.len(), 4 * rows),
-                    if next_int8 {
-                        short("int8 layer shift bytes", shift.len(), rows)
-                    } else {
-                        short("int8 layer scale bytes", w_scale.0.len(), 4 * rows)
-                    },
-                    if next_int8 {
-                        short("int8 layer multiplier bytes", mult.0.len(), 4 * rows)
-                    } else {
-                        None
-                    },
-                ];
-                if let Some(e) = checks.into_iter().flatten().next() {
-                    return Err(e);
+                    });
                 }
                 if !in_int8 {
                     quantize_packed(f_src.get(..cols).unwrap_or(&[]), 1.0 / in_scale, q_src);
