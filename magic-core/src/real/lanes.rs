@@ -626,19 +626,20 @@ pub(crate) fn ln4_of(x: F64x4) -> F64x4 {
 /// `libm::exp`.
 #[inline]
 fn exp4(x: [f64; 4]) -> [f64; 4] {
-    // Boundaries of e_exp.c, as |x| thresholds (its tests on the high word of |x|).
+    // Boundaries of e_exp.c, as |x| thresholds (its tests on the high word of |x|); its constants
+    // by their bits, as e_exp.c gives them.
     const SPECIAL: f64 = f64::from_bits(0x4086_232b_0000_0000); // ≈ 708.39
     const REDUCE: f64 = f64::from_bits(0x3fd6_2e43_0000_0000); // > 0.5·ln 2
     const FAR: f64 = f64::from_bits(0x3ff0_a2b2_0000_0000); // ≥ 1.5·ln 2
     const TINY: f64 = f64::from_bits(0x3e30_0001_0000_0000); // > 2^-28
-    const LN2HI: f64 = 6.93147180369123816490e-01;
-    const LN2LO: f64 = 1.90821492927058770002e-10;
-    const INVLN2: f64 = 1.44269504088896338700e+00;
-    const P1: f64 = 1.66666666666666019037e-01;
-    const P2: f64 = -2.77777777770155933842e-03;
-    const P3: f64 = 6.61375632143793436117e-05;
-    const P4: f64 = -1.65339022054652515390e-06;
-    const P5: f64 = 4.13813679705723846039e-08;
+    const LN2HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+    const INVLN2: f64 = f64::from_bits(0x3ff7_1547_652b_82fe);
+    const P1: f64 = f64::from_bits(0x3fc5_5555_5555_553e);
+    const P2: f64 = f64::from_bits(0xbf66_c16c_16be_bd93);
+    const P3: f64 = f64::from_bits(0x3f11_566a_af25_de2c);
+    const P4: f64 = f64::from_bits(0xbebb_bd41_c5d2_6bf1);
+    const P5: f64 = f64::from_bits(0x3e66_3769_72be_a4d0);
     let c = F64x4::c;
     let x = F64x4(x);
     let ax = x.map(|v| f64::from_bits(v.to_bits() & !(1 << 63)));
@@ -665,18 +666,19 @@ fn exp4(x: [f64; 4]) -> [f64; 4] {
 }
 
 /// `ln x` for four lanes: `libm::log` (FreeBSD's `e_log.c`) step by step, for positive normal
-/// finite `x`; other lanes send the batch through `libm::log`.
+/// finite `x`; other lanes send the batch through `libm::log`. Its constants by their bits, as
+/// e_log.c gives them.
 #[inline]
 fn ln4(x: [f64; 4]) -> [f64; 4] {
-    const LN2_HI: f64 = 6.93147180369123816490e-01;
-    const LN2_LO: f64 = 1.90821492927058770002e-10;
-    const LG1: f64 = 6.666666666666735130e-01;
-    const LG2: f64 = 3.999999999940941908e-01;
-    const LG3: f64 = 2.857142874366239149e-01;
-    const LG4: f64 = 2.222219843214978396e-01;
-    const LG5: f64 = 1.818357216161805012e-01;
-    const LG6: f64 = 1.531383769920937332e-01;
-    const LG7: f64 = 1.479819860511658591e-01;
+    const LN2_HI: f64 = f64::from_bits(0x3fe6_2e42_fee0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3dea_39ef_3579_3c76);
+    const LG1: f64 = f64::from_bits(0x3fe5_5555_5555_5593);
+    const LG2: f64 = f64::from_bits(0x3fd9_9999_9997_fa04);
+    const LG3: f64 = f64::from_bits(0x3fd2_4924_9422_9359);
+    const LG4: f64 = f64::from_bits(0x3fcc_71c5_1d8e_78af);
+    const LG5: f64 = f64::from_bits(0x3fc7_4664_96cb_03de);
+    const LG6: f64 = f64::from_bits(0x3fc3_9a09_d078_c69f);
+    const LG7: f64 = f64::from_bits(0x3fc2_f112_df3e_5244);
     let c = F64x4::c;
     let x = F64x4(x);
     if !all(mask(x, |v| (f64::MIN_POSITIVE..f64::INFINITY).contains(&v))) {

@@ -433,9 +433,12 @@ impl<'a> Inform<'a> {
     }
 
     /// Bands and exact Jacobian `∂band/∂z` (13 × 7) at the learned variables
-    /// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, by forward-mode differentiation with a split chain
-    /// rule ([`LearnedJacobian`]). The result equals [`Inform::forward_learned`] on [`Dual<7>`]
-    /// up to round-off.
+    /// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, by forward-mode differentiation with the chain rule
+    /// split so that each part carries few derivatives: PROSPECT-D on [`Dual<4>`] in
+    /// (N, cab, cw, cm), the canopy on `Dual<4>` in (leaf reflectance, leaf transmittance, LAI,
+    /// LAIu), the cover through the crown fractions, which the forest reflectance is linear in;
+    /// four wavelengths at a time (duals on SIMD lanes). The result equals
+    /// [`Inform::forward_learned`] on [`Dual<7>`] up to round-off.
     pub fn jacobian(
         &self,
         z: &[f64; N_LEARNED],
