@@ -296,8 +296,8 @@ pub fn invert_probed<R: Real, P: Problems, Q: Probe>(
     }
     // (`observed` ≤ MAX_OBS: exact in f32.)
     let n = R::c(observed as f32 as f64);
-    let rms = (ss / n).sqrt();
-    let rms_std = (ss_std / n).sqrt();
+    let rms = crate::mogi::sqrt(ss / n);
+    let rms_std = crate::mogi::sqrt(ss_std / n);
     if model.residual_threshold > 0.0 && rms_std > R::c(model.residual_threshold as f64) {
         flags.0 |= Flags::HIGH_RESIDUAL;
     }

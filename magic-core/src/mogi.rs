@@ -153,6 +153,19 @@ impl Network for Stations<'_> {
     }
 }
 
+/// `√x` in `R`. With the `dsp` feature on ARM (the firmware) the f32 case runs the FPU's
+/// `VSQRT.F32` (bit-identical to libm's correctly rounded `sqrtf`, a software routine there):
+/// `R` is f32 exactly when it is 4 bytes wide (f64 and the dual numbers are wider), and for f32
+/// the conversions through `value` and `c` are identities. Elsewhere `R::sqrt`.
+#[inline(always)]
+pub fn sqrt<R: Real>(x: R) -> R {
+    #[cfg(all(feature = "dsp", target_arch = "arm"))]
+    if core::mem::size_of::<R>() == 4 {
+        return R::c(crate::quant::dsp::sqrt_f32(x.value() as f32) as f64);
+    }
+    x.sqrt()
+}
+
 /// Displacement (east, north, up) in mm at one station from a source `p = [x, y, depth, ΔV]`.
 #[inline]
 pub fn displacement<R: Real>(station: &Station, p: &[R; N_PARAMS]) -> [R; 3] {
@@ -160,7 +173,7 @@ pub fn displacement<R: Real>(station: &Station, p: &[R; N_PARAMS]) -> [R; 3] {
     let dy = R::c(station.y_km) - p[1];
     let d = p[2];
     let r2 = dx * dx + dy * dy + d * d;
-    let r3 = r2 * r2.sqrt();
+    let r3 = r2 * sqrt(r2);
     // α in mm·km²: (1 − ν) ΔV / π × 1000 (m → mm)
     let alpha = p[3] * R::c((1.0 - POISSON) / core::f64::consts::PI * 1000.0);
     let k = alpha / r3;

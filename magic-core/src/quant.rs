@@ -439,6 +439,28 @@ pub mod dsp {
     use super::packed_get;
     use core::arch::asm;
 
+    /// The FPU's square root (`VSQRT.F32`, correctly rounded like libm's `sqrtf`, which on this
+    /// target is a software routine of about 80 instructions and 480 bytes). Used through
+    /// [`crate::mogi::sqrt`].
+    #[inline(always)]
+    pub fn sqrt_f32(x: f32) -> f32 {
+        let y: u32;
+        // SAFETY: register moves and one FPU instruction; no memory, no stack. `s0` is used as
+        // scratch (the `sreg` operand class is not available on this target): it is declared
+        // clobbered with the other caller-saved registers of the C ABI.
+        unsafe {
+            asm!(
+                "vmov s0, r0",
+                "vsqrt.f32 s0, s0",
+                "vmov r0, s0",
+                inout("r0") x.to_bits() => y,
+                clobber_abi("C"),
+                options(pure, nomem, nostack),
+            );
+        }
+        f32::from_bits(y)
+    }
+
     /// See [`super::pack_word`].
     #[inline(always)]
     pub fn sxtb16_pair(w: u32) -> [u32; 2] {
