@@ -445,16 +445,17 @@ pub mod dsp {
     #[inline(always)]
     pub fn sqrt_f32(x: f32) -> f32 {
         let y: u32;
-        // SAFETY: register moves and one FPU instruction; no memory, no stack. `s0` is used as
-        // scratch (the `sreg` operand class is not available on this target): it is declared
-        // clobbered with the other caller-saved registers of the C ABI.
+        // SAFETY: register moves and one FPU instruction; no memory, no stack. `s0` is the
+        // scratch register (the `sreg` operand class needs a target feature this target does
+        // not name), declared clobbered.
         unsafe {
             asm!(
-                "vmov s0, r0",
+                "vmov s0, {x}",
                 "vsqrt.f32 s0, s0",
-                "vmov r0, s0",
-                inout("r0") x.to_bits() => y,
-                clobber_abi("C"),
+                "vmov {y}, s0",
+                x = in(reg) x.to_bits(),
+                y = lateout(reg) y,
+                out("s0") _,
                 options(pure, nomem, nostack),
             );
         }
