@@ -342,6 +342,23 @@ fn mul_wide(a: u64, b: u64) -> (u64, u64) {
 fn div_bits(m: u64, d: u64, bits: u32) -> (u64, u32, bool) {
     // The first (bit length of d) − 1 bits of m are below d: no quotient bit.
     let c0 = 63 - d.leading_zeros();
+    if d < 1 << 31 && bits <= 32 && c0 + bits + 1 < 64 {
+        // The usual case (up to 5¹³, a short quotient): remainder and quotient in 32 bits, the
+        // dividend's bits shifted out of a 64-bit word (about 10 instructions a bit).
+        let (d32, mut rest) = (d as u32, m << c0);
+        let (mut c, mut r, mut q) = (c0, (m >> 1 >> (63 - c0)) as u32, 0u32);
+        while q < 1 << (bits - 1) && c < 63 {
+            c += 1;
+            r = (r << 1) | (rest >> 63) as u32;
+            rest <<= 1;
+            q <<= 1;
+            if r >= d32 {
+                r -= d32;
+                q |= 1;
+            }
+        }
+        return (q as u64, c, r != 0 || rest != 0);
+    }
     let (mut c, mut r, mut q) = (c0, if c0 == 0 { 0 } else { m >> (64 - c0) }, 0u64);
     while q < 1 << (bits - 1) && c < 200 {
         c += 1;
