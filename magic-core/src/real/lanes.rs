@@ -11,7 +11,8 @@
 //! vector instructions, which keeps the processor busy where one batch's long dependency chain
 //! (INFORM per wavelength is a chain of some thousand cycles) would leave it waiting. It is the
 //! lanes of `f64`; duals, whose derivatives already fill the registers, keep four lanes
-//! ([`DualScalar`]).
+//! ([`DualScalar`]). These lanes are used on targets with SIMD (x86-64, AArch64); on others (the
+//! Cortex-M4F) every type is its own single lane, which there runs faster and is much smaller.
 //!
 //! Every lane of an `F64x4` result equals, bit for bit, the `f64` result of the same operation
 //! on that lane (same operations in the same order; `exp` and `ln` follow `libm`'s algorithms
@@ -48,10 +49,10 @@ pub trait DualScalar: Real<Plain = Self> {
 }
 
 impl DualScalar for f64 {
-    type DualLanes = F64x4;
+    type DualLanes = DualLanesF64;
 }
 impl DualScalar for f32 {
-    type DualLanes = F32x4;
+    type DualLanes = DualLanesF32;
 }
 impl DualScalar for F64x4 {
     type DualLanes = F64x4;
@@ -61,6 +62,41 @@ impl DualScalar for F32x4 {
 }
 impl DualScalar for F64x8 {
     type DualLanes = F64x8;
+}
+
+/// Whether this target computes lanes with SIMD instructions (x86-64, AArch64). Elsewhere (the
+/// Cortex-M4F) lanes would only multiply the code (and, for `f64`, the soft-float calls): every
+/// type is then its own single lane.
+macro_rules! simd_target {
+    ($($item:item)*) => {
+        $(#[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))] $item)*
+    };
+}
+macro_rules! scalar_target {
+    ($($item:item)*) => {
+        $(#[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))] $item)*
+    };
+}
+
+simd_target! {
+    /// The lanes of `f64` ([`Real::Lanes`]): [`F64x8`] on SIMD targets, `f64` elsewhere.
+    pub type LanesF64 = F64x8;
+    /// The lanes of `f32`: [`F32x4`] on SIMD targets, `f32` elsewhere.
+    pub type LanesF32 = F32x4;
+    /// The lanes of duals on `f64`: [`F64x4`] on SIMD targets, `f64` elsewhere.
+    pub type DualLanesF64 = F64x4;
+    /// The lanes of duals on `f32`: [`F32x4`] on SIMD targets, `f32` elsewhere.
+    pub type DualLanesF32 = F32x4;
+}
+scalar_target! {
+    /// The lanes of `f64` ([`Real::Lanes`]): [`F64x8`] on SIMD targets, `f64` elsewhere.
+    pub type LanesF64 = f64;
+    /// The lanes of `f32`: [`F32x4`] on SIMD targets, `f32` elsewhere.
+    pub type LanesF32 = f32;
+    /// The lanes of duals on `f64`: [`F64x4`] on SIMD targets, `f64` elsewhere.
+    pub type DualLanesF64 = f64;
+    /// The lanes of duals on `f32`: [`F32x4`] on SIMD targets, `f32` elsewhere.
+    pub type DualLanesF32 = f32;
 }
 
 /// A plain float is also a batch of one: lanes of a single value.

@@ -45,8 +45,9 @@ pub trait Real:
     /// precomputed factors): `f64` for `f64` and [`Dual`], `f32` for `f32`, the lanes themselves
     /// for lanes.
     type Plain: Real;
-    /// Several values of this type computed together: [`F64x8`] for `f64`, [`F32x4`] for `f32`,
-    /// duals on [`F64x4`] for duals on `f64`; lanes are their own single lane.
+    /// Several values of this type computed together: on targets with SIMD (x86-64, AArch64)
+    /// [`F64x8`] for `f64`, [`F32x4`] for `f32`, duals on [`F64x4`] for duals on `f64`; elsewhere
+    /// (the Cortex-M4F) each type is its own single lane, as lanes are for themselves.
     type Lanes: Lanes<Self>;
 
     /// A constant (derivatives zero).
@@ -165,7 +166,7 @@ pub trait Real:
 
 impl Real for f64 {
     type Plain = f64;
-    type Lanes = F64x8;
+    type Lanes = lanes::LanesF64;
     #[inline]
     fn c(v: f64) -> Self {
         v
@@ -251,7 +252,7 @@ impl Real for f64 {
 
 impl Real for f32 {
     type Plain = f32;
-    type Lanes = F32x4;
+    type Lanes = lanes::LanesF32;
     #[inline]
     fn c(v: f64) -> Self {
         v as f32

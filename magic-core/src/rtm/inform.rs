@@ -353,8 +353,8 @@ impl<R: Real> Scene<R> {
         }
     }
 
-    /// The scene broadcast to lanes ([`Real::Lanes`]: four wavelengths per evaluation for
-    /// `f64` and `f32`; a dual scene is its own single lane).
+    /// The scene broadcast to lanes ([`Real::Lanes`]: several wavelengths per evaluation on
+    /// SIMD targets, eight for `f64`, four for `f32` and duals).
     pub fn lanes(&self) -> Scene<R::Lanes> {
         let f = <R::Lanes as Lanes<R>>::splat;
         Scene {

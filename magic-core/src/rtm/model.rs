@@ -3,9 +3,9 @@
 //! [`Tables`] borrows every spectral table (the crate ships none); [`Inform::new`] checks their
 //! sizes once and finds the wavelengths the bands need; [`Inform::forward`] validates the inputs,
 //! computes the wavelength-independent terms once ([`Scene`]) and evaluates PROSPECT-D, four 4SAIL
-//! calls and FLIM only at those wavelengths, four wavelengths per evaluation for `f64` and `f32`
-//! (SIMD lanes, [`Real::Lanes`]). Everything is generic over [`Real`]: `f64`, `f32`, and [`Dual`]
-//! for the exact Jacobian ([`Inform::jacobian`]).
+//! calls and FLIM only at those wavelengths, several wavelengths per evaluation on SIMD targets
+//! (eight for `f64`, four for `f32` and duals: [`Real::Lanes`]). Everything is generic over
+//! [`Real`]: `f64`, `f32`, and [`Dual`] for the exact Jacobian ([`Inform::jacobian`]).
 
 use super::inform::{
     crown_fraction_terms, crown_from_cover, crown_geometry, Geometry, Scene, SpectralRow, Stand,
