@@ -211,12 +211,6 @@ impl<const N: usize, T: DualScalar> Real for Dual<N, T> {
         self.v.any(pred)
     }
     #[inline]
-    fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
-        let g = self.v.apply(&f);
-        let dg = self.v.apply(|x| (f(x).1, 0.0));
-        self.chain(g, dg)
-    }
-    #[inline]
     fn value(self) -> f64 {
         self.v.value()
     }

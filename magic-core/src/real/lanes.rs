@@ -234,8 +234,7 @@ macro_rules! lane_type {
 lane_type!(F64x4, f64);
 lane_type!(F32x4, f32);
 
-/// The [`Real`] items that are the same for both lane types (`$f` the lane type, `$lib` the
-/// module with its scalar functions).
+/// The [`Real`] items that are the same for both lane types (`$t` the lanes, `$f` one lane).
 macro_rules! lane_real_common {
     ($t:ident, $f:ty) => {
         type Plain = $t;
@@ -288,10 +287,6 @@ macro_rules! lane_real_common {
             let (a, b) = (a(), b());
             let pick = |i: usize| if take[i] { a.0[i] } else { b.0[i] };
             $t([pick(0), pick(1), pick(2), pick(3)])
-        }
-        #[inline]
-        fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
-            self.map(|x| f(x as f64).0 as $f)
         }
         #[inline]
         fn abs(self) -> Self {
@@ -565,10 +560,6 @@ impl Real for F64x8 {
             self.0.select(&pred, || a.0, || b.0),
             self.1.select(&pred, || a.1, || b.1),
         )
-    }
-    #[inline(always)]
-    fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
-        F64x8(self.0.apply(&f), self.1.apply(&f))
     }
     halves!(sqrt, exp, ln, sin, cos, tan, acos, asin, atan, abs, e1);
     #[inline(always)]

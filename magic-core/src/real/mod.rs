@@ -84,13 +84,6 @@ pub trait Real:
     fn any(self, pred: impl Fn(f64) -> bool) -> bool {
         pred(self.value())
     }
-    /// A scalar function given by its value and derivative, `f(x) = (g(x), g'(x))`, applied to
-    /// `self` (lane by lane for lanes; by the chain rule for duals), for functions evaluated in
-    /// f64 outside the scalar type (such as PROSPECT's plate transmissivity).
-    #[inline]
-    fn apply(self, f: impl Fn(f64) -> (f64, f64)) -> Self {
-        Self::c(f(self.value()).0)
-    }
     /// The primal value as `f64` (for branching and reporting).
     fn value(self) -> f64;
     /// Square root.

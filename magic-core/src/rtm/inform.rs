@@ -396,6 +396,7 @@ impl<R: Real> Scene<R> {
         let md = medium(self.ext.bf, leaf);
         let dir = directional(&self.ext, &md);
         let slab_c = slab(&md, self.crown_s.lai);
+        // The understory (LAIu) on the soil.
         let soil = self.psoil.scale(row.soil_dry) + (R::one() - self.psoil).scale(row.soil_wet);
         let u = sail_view(
             &self.understory,
@@ -407,9 +408,11 @@ impl<R: Real> Scene<R> {
         // Direct and diffuse reflectance weighted by the irradiance (mixed_reflectance).
         let (w_dir, w_dif) = irradiance_weights(self.skyl_s, row.es, row.ed);
         let r_u = u.rsot * w_dir + u.rdot * w_dif;
+        // The optically thick crown layer on the understory.
         let slab_inf = slab(&md, self.crown_inf.lai);
         let inf = sail_view(&self.crown_inf, &md, &dir, &slab_inf, r_u);
         let r_inf = inf.rsot * w_dir + inf.rdot * w_dif;
+        // The crown layer (single-tree LAI) on the understory: its transmittances.
         let (t_s, t_o) = match self.geometry {
             Geometry::Reference => {
                 let s = sail_view(&self.crown_s, &md, &dir, &slab_c, r_u);

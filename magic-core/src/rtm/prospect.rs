@@ -196,9 +196,11 @@ pub fn leaf_optics<R: Real>(c: &CoefRow<R::Plain>, leaf: &Leaf<R>) -> LeafOptics
     let tau = plate_interior(c, leaf);
     let plate = elementary_layer(c, tau);
     let (va, va_inv, vb2) = stokes_terms(plate.r90, plate.t90);
-    // The N − 1 further layers: vbnn = vb^(N−1), with ln vb = ln(vb²)/2. Stokes' solution
-    // d = vbnn − 1/vbnn, s3 = va·vbnn − vbnn/va... is multiplied through by vbnn, with W = vbnn²:
-    // d·vbnn = W − 1, s3·vbnn = va·W − 1/va − r90·(W − 1) (one division instead of two).
+    // The N − 1 further layers (Stokes): with vbnn = vb^(N−1) (ln vb = ln(vb²)/2),
+    //   d = vbnn − 1/vbnn,  s3 = va·vbnn − 1/(va·vbnn) − r90·d,
+    //   R = ra + ta·t90·d/s3,  T = ta·(va − 1/va)/s3,
+    // multiplied through by vbnn, with W = vbnn²: d·vbnn = W − 1 and
+    // s3·vbnn = va·W − 1/va − r90·(W − 1) (one division instead of two).
     let vbnn = ((leaf.n - one) * R::c(0.5) * vb2.ln()).exp();
     let w = vbnn * vbnn;
     let inv = one / (va * w - va_inv - plate.r90 * (w - one));
@@ -263,12 +265,13 @@ fn elementary_layer<R: Real>(c: &CoefRow<R::Plain>, tau: R) -> Plate<R> {
 ///
 /// ```text
 /// A = 1 + r² − t²,  B = 1 − r² + t²,  δ = sqrt(A² − 4r²) = sqrt((1 − (r+t)²)(1 − (r−t)²)),
-/// va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = (1 − r² − t² + δ)/(2r),
-/// va·(β − r) = 2t²/(B + δ),  vb² = β·(va − r) / (va·(β − r)) = (1 − r² − t² + δ)·(B + δ) / ((A + δ)·2t²).
+/// C = 1 − r² − t² + δ,  va = (A + δ)/(2r),  β = 1/va = 2r/(A + δ),  va − r = C/(2r),
+/// va·(β − r) = 2t²/(B + δ),  vb² = β·(va − r) / (va·(β − r)) = C·(B + δ) / ((A + δ)·2t²).
 /// ```
 ///
-/// The reference floors `va·(β − r)` at 1e-14, i.e. `2t²` at `1e-14·(B + δ)`. The three terms
-/// share one division.
+/// The reference floors `va·(β − r)` at 1e-14, i.e. `2t²` at `g = 1e-14·(B + δ)`. The three
+/// terms share one division `e = 1/((A + δ)·2r·g)`: `va = (A + δ)²·g·e`, `β = (2r)²·g·e`,
+/// `vb² = C·(B + δ)·2r·e`.
 #[inline]
 fn stokes_terms<R: Real>(r: R, t: R) -> (R, R, R) {
     let one = R::one();
