@@ -338,7 +338,10 @@ fn pass<R: Real, P: Problems, Q: Probe>(
     for (i, (p, &u)) in out.params.iter_mut().zip(unit.iter()).enumerate() {
         *p = match (scaled, model.bounds.get(i)) {
             (true, Some(&[lo, hi])) => {
-                at_bound |= u < 1e-3 || u > 1.0 - 1e-3;
+                // (Not `!(a..=b).contains(&u)`: a NaN output must not count as at a bound.)
+                #[allow(clippy::manual_range_contains)]
+                let edge = u < 1e-3 || u > 1.0 - 1e-3;
+                at_bound |= edge;
                 R::c(lo as f64) + R::c((hi - lo) as f64) * R::c(u as f64)
             }
             _ => R::c(u as f64),

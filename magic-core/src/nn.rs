@@ -150,7 +150,7 @@ impl Layer<'_> {
                 opt("int8 layer multiplier bytes", mult.0.len(), 4 * r)?;
                 opt("int8 layer shift bytes", shift.len(), r)?;
                 let ok_scale = |s: f32| s.is_finite() && s > 0.0;
-                if !ok_scale(in_scale) || !(out_scale.is_finite() && out_scale >= 0.0) {
+                if !ok_scale(in_scale) || !out_scale.is_finite() || out_scale < 0.0 {
                     return Err(Error::InvalidModel(
                         "int8 activation scale not positive and finite",
                     ));
@@ -160,7 +160,7 @@ impl Layer<'_> {
                         "int8 weight scale not positive and finite",
                     ));
                 }
-                if w.iter().any(|&b| b == 0x80) {
+                if w.contains(&0x80) {
                     return Err(Error::InvalidModel(
                         "int8 weight -128 (symmetric range is ±127)",
                     ));
@@ -659,8 +659,8 @@ mod tests {
                     let y: std::vec::Vec<f32> = (0..rows)
                         .map(|r| {
                             let mut acc = bias.get(r);
-                            for c in 0..cols {
-                                acc += LeF32(&w.0[4 * (r * cols + c)..]).get(0) * f[c];
+                            for (c, x) in f.iter().enumerate().take(cols) {
+                                acc += LeF32(&w.0[4 * (r * cols + c)..]).get(0) * x;
                             }
                             activate(acc, l.act)
                         })

@@ -950,8 +950,8 @@ mod tests {
         want[5] &= 0xFFFF;
         assert_eq!(got[..5], want[..5]);
         assert_eq!(pack4([x[0], x[1], x[2], x[3]]), [want[0], want[1]]);
-        for k in 0..11 {
-            assert_eq!(packed_get(&want, k), x[k] as i32);
+        for (k, &v) in x.iter().enumerate() {
+            assert_eq!(packed_get(&want, k), v as i32);
         }
     }
 

@@ -742,7 +742,7 @@ mod tests {
             flags: Flags(5),
             used: 0xFFF,
         };
-        inv.params[..4].copy_from_slice(&[-3.141_592_7, 0.0078125, 12.5, -0.000_000_3]);
+        inv.params[..4].copy_from_slice(&[-3.125_976_5, 0.0078125, 12.5, -0.000_000_3]);
         let (mut a, mut b) = (String::new(), String::new());
         magic_core::line::write_result(&mut a, &inv).unwrap();
         write_result(&mut b, &inv).unwrap();
