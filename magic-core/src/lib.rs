@@ -28,7 +28,7 @@ pub mod real;
 pub mod rtm;
 pub mod time;
 
-pub use error::Error;
+pub use error::{Error, MessageSink};
 pub use real::{Dual, Real};
 pub mod invert;
 pub mod line;

@@ -6,7 +6,8 @@
 //! variables of the model, then the residual in physical units, the flag bits and the bit mask of
 //! stations used), or `error,<message>` for a line that could not be inverted.
 
-use crate::{Error, Inversion, Real};
+use crate::error::FmtSink;
+use crate::{Error, Inversion, MessageSink, Real};
 use core::fmt::{self, Write};
 
 /// Why an input line could not be read.
@@ -35,17 +36,36 @@ pub enum LineError {
     Invert(Error),
 }
 
+impl LineError {
+    /// Writes the message `Display` prints, piece by piece (see [`Error::describe`]).
+    pub fn describe<S: MessageSink + ?Sized>(&self, s: &mut S) {
+        let n32 = |n: usize| u32::try_from(n).unwrap_or(u32::MAX);
+        match *self {
+            LineError::FieldCount { expected, found } => {
+                s.text("expected ");
+                s.number(n32(expected));
+                s.text(" fields, found ");
+                s.number(n32(found));
+            }
+            LineError::NotANumber { field } => {
+                s.text("field ");
+                s.number(n32(field));
+                s.text(": not a number");
+            }
+            LineError::OutOfRange { field } => {
+                s.text("field ");
+                s.number(n32(field));
+                s.text(": infinite or beyond 10 m");
+            }
+            LineError::BadDate => s.text("field 1: expected a date YYYY-MM-DD"),
+            LineError::Invert(e) => e.describe(s),
+        }
+    }
+}
+
 impl fmt::Display for LineError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            LineError::FieldCount { expected, found } => {
-                write!(f, "expected {expected} fields, found {found}")
-            }
-            LineError::NotANumber { field } => write!(f, "field {field}: not a number"),
-            LineError::OutOfRange { field } => write!(f, "field {field}: infinite or beyond 10 m"),
-            LineError::BadDate => write!(f, "field 1: expected a date YYYY-MM-DD"),
-            LineError::Invert(e) => write!(f, "{e}"),
-        }
+        FmtSink::display(f, |s| self.describe(s))
     }
 }
 

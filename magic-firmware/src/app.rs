@@ -6,7 +6,7 @@ use crate::io::{Line, Out, Stdin, LINE_MAX};
 use crate::text::{parse_record_bytes, write_result};
 use core::fmt::Write;
 use magic_core::invert::{invert_probed, Part, Probe, Workspace};
-use magic_core::line::{write_error, LineError};
+use magic_core::line::LineError;
 #[cfg(feature = "rtm")]
 use magic_core::model_file::AnyProblem;
 #[cfg(not(feature = "rtm"))]
@@ -54,14 +54,16 @@ pub fn run() -> bool {
     let model = match load_model() {
         Some(Ok(m)) => m,
         Some(Err(e)) => {
-            let _ = write!(out, "error,model: {e}");
+            let _ = out.write_str("error,model: ");
+            e.describe(&mut out);
             out.end_line();
             return false;
         }
         None => return false,
     };
     if let Err(what) = self_check(model) {
-        let _ = write!(out, "error,self-check: {what}");
+        let _ = out.write_str("error,self-check: ");
+        let _ = out.write_str(what);
         out.end_line();
         return false;
     }
@@ -119,7 +121,9 @@ pub fn run() -> bool {
             }
             Err(e) => {
                 errors += 1;
-                let _ = write_error(&mut out, &e);
+                // As `magic_core::line::write_error` writes it, without `core::fmt`.
+                let _ = out.write_str("error,");
+                e.describe(&mut out);
             }
         }
         out.end_line();
@@ -201,7 +205,8 @@ fn load_model() -> Option<Result<&'static Model<'static>, magic_core::Error>> {
 fn kv(out: &mut Out, key: &str, v: u32) {
     let _ = out.write_str("# ");
     let _ = out.write_str(key);
-    let _ = write!(out, "={v}");
+    let _ = out.write_char('=');
+    let _ = crate::text::write_u32(out, v);
     out.end_line();
 }
 

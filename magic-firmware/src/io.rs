@@ -188,3 +188,17 @@ impl fmt::Write for Out {
         Ok(())
     }
 }
+
+/// Core's error messages written piece by piece, numbers by [`crate::text`]: the same words as
+/// its `Display`, without `core::fmt`'s formatting code.
+impl magic_core::MessageSink for Out {
+    fn text(&mut self, s: &str) {
+        let _ = fmt::Write::write_str(self, s);
+    }
+    fn number(&mut self, n: u32) {
+        let _ = crate::text::write_u32(self, n);
+    }
+    fn hex(&mut self, n: u32) {
+        let _ = crate::text::write_hex32(self, n);
+    }
+}

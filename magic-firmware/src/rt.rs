@@ -2,6 +2,7 @@
 //! hangs.
 
 use crate::io::{exit, Out};
+use crate::text::write_u32;
 use core::fmt::Write;
 use cortex_m_rt::{entry, exception, ExceptionFrame};
 
@@ -18,7 +19,10 @@ fn main() -> ! {
 #[exception]
 unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
     let mut out = Out::new();
-    let _ = write!(out, "error,hardfault: pc={} lr={}", ef.pc(), ef.lr());
+    let _ = out.write_str("error,hardfault: pc=");
+    let _ = write_u32(&mut out, ef.pc());
+    let _ = out.write_str(" lr=");
+    let _ = write_u32(&mut out, ef.lr());
     out.end_line();
     exit(false)
 }
@@ -29,7 +33,8 @@ unsafe fn HardFault(ef: &ExceptionFrame) -> ! {
 unsafe fn DefaultHandler(irqn: i16) {
     let mut out = Out::new();
     // As u32 (two's complement for the negative system exceptions): saves the i32 formatter.
-    let _ = write!(out, "error,unexpected exception {}", irqn as i32 as u32);
+    let _ = out.write_str("error,unexpected exception ");
+    let _ = write_u32(&mut out, irqn as i32 as u32);
     out.end_line();
     exit(false)
 }

@@ -19,6 +19,8 @@
 //!   prints them. The board's values are f32 (its residual too) and are formatted exactly, in
 //!   integer arithmetic, so the text is identical. Magnitudes of 2³² and more (never produced by
 //!   a valid model) are written in exponent form.
+//! * [`write_u32`] and [`write_hex32`] print integers without `core::fmt` (its formatting
+//!   machinery costs about 2 KB of flash), for the result rows, the cost figures and the errors.
 
 use core::fmt::{self, Write};
 use magic_core::line::LineError;
@@ -424,7 +426,43 @@ pub fn write_result<W: Write>(w: &mut W, inv: &Inversion<f32>) -> fmt::Result {
         w.write_char(',')?;
     }
     write_fixed6(w, inv.residual_rms as f32)?;
-    write!(w, ",{},{}", inv.flags.0, inv.used)
+    w.write_char(',')?;
+    write_u32(w, u32::from(inv.flags.0))?;
+    w.write_char(',')?;
+    write_u32(w, u32::from(inv.used))
+}
+
+/// Writes `v` in decimal, as `{v}` does.
+pub fn write_u32<W: Write>(w: &mut W, v: u32) -> fmt::Result {
+    write_digits(w, v, 1)
+}
+
+/// Writes `v` in decimal with at least `min` digits (zeros in front; `min` up to 10).
+fn write_digits<W: Write>(w: &mut W, mut v: u32, min: usize) -> fmt::Result {
+    let mut buf = [b'0'; 10];
+    let mut i = buf.len();
+    while v > 0 || buf.len() - i < min {
+        let Some(slot) = i.checked_sub(1) else { break };
+        i = slot;
+        if let Some(b) = buf.get_mut(i) {
+            *b = b'0' + (v % 10) as u8;
+        }
+        v /= 10;
+    }
+    for &b in buf.get(i..).unwrap_or(&[]) {
+        w.write_char(char::from(b))?;
+    }
+    Ok(())
+}
+
+/// Writes `v` as `{v:#010x}` does: `0x` and eight lower-case hex digits.
+pub fn write_hex32<W: Write>(w: &mut W, v: u32) -> fmt::Result {
+    w.write_str("0x")?;
+    for k in (0..8).rev() {
+        let d = ((v >> (4 * k)) & 0xF) as u8;
+        w.write_char(char::from(if d < 10 { b'0' + d } else { b'a' + d - 10 }))?;
+    }
+    Ok(())
 }
 
 /// Writes `v` as `format!("{v:.6}")` does, exactly, in integer arithmetic (no soft-float f64 on
@@ -438,7 +476,8 @@ pub fn write_fixed6<W: Write>(w: &mut W, v: f32) -> fmt::Result {
     let sign = if v.is_sign_negative() { "-" } else { "" };
     let a = v.abs();
     if a.is_infinite() {
-        return write!(w, "{sign}inf");
+        w.write_str(sign)?;
+        return w.write_str("inf");
     }
     if a < 4_294_967_296.0 {
         let bits = a.to_bits();
@@ -470,7 +509,10 @@ pub fn write_fixed6<W: Write>(w: &mut W, v: f32) -> fmt::Result {
             q = 0;
         }
         if let Ok(ip) = u32::try_from(ip) {
-            return write!(w, "{sign}{ip}.{:06}", q as u32);
+            w.write_str(sign)?;
+            write_u32(w, ip)?;
+            w.write_char('.')?;
+            return write_digits(w, q as u32, 6);
         }
     }
     // Exponent form d.dddddde<k> (not Rust's output; unreachable for valid models).
@@ -481,12 +523,42 @@ pub fn write_fixed6<W: Write>(w: &mut W, v: f32) -> fmt::Result {
         k += 1;
     }
     let q = (m * 1e6 + 0.5) as u32;
-    write!(w, "{sign}{}.{:06}e{k}", q / 1_000_000, q % 1_000_000)
+    w.write_str(sign)?;
+    write_u32(w, q / 1_000_000)?;
+    w.write_char('.')?;
+    write_digits(w, q % 1_000_000, 6)?;
+    w.write_char('e')?;
+    write_u32(w, k)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn integers_print_as_fmt_prints_them() {
+        let mut vals = std::vec![0u32, 1, 9, 10, 99, 100, 4095, 65_535, 999_999, 1_000_000];
+        vals.extend([u32::MAX, u32::MAX - 1, 0x8000_0000, 0xDEAD_BEEF]);
+        let mut x = 0x1234_5678u32;
+        for _ in 0..2000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            vals.push(x >> (x % 32));
+        }
+        for v in vals {
+            let (mut a, mut b) = (String::new(), String::new());
+            write_u32(&mut a, v).unwrap();
+            assert_eq!(a, std::format!("{v}"));
+            write_hex32(&mut b, v).unwrap();
+            assert_eq!(b, std::format!("{v:#010x}"));
+            if v < 1_000_000 {
+                let mut c = String::new();
+                write_digits(&mut c, v, 6).unwrap();
+                assert_eq!(c, std::format!("{v:06}"));
+            }
+        }
+    }
 
     #[test]
     fn dates_as_core_parses_them() {
