@@ -15,7 +15,7 @@
 use magic_core::model_file::{Model, Variant};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::nn::Activation;
-use magic_train::export::{OwnedLayer, OwnedModel, OwnedWeights};
+use magic_train::export::{OwnedEffect, OwnedLayer, OwnedModel, OwnedWeights};
 use magic_train::qemu::{build_firmware, build_firmware_with, ensure_toolchain, run_firmware};
 use std::path::PathBuf;
 
@@ -88,6 +88,12 @@ fn observation(rng: &mut Rng, st: &[Station]) -> Vec<f32> {
 /// A variant-C model (encoder 36-64-32-16-4, correction 36-144-36) with random weights,
 /// quantised to int8 with calibration rows, as model-file bytes.
 fn model_bytes() -> Vec<u8> {
+    model_bytes_with(vec![])
+}
+
+/// The same with declared effects: the encoder gains one output per latent variable (bounded as
+/// the trainer bounds them).
+fn model_bytes_with(effects: Vec<OwnedEffect>) -> Vec<u8> {
     let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
     let st = stations();
     let rows: Vec<Vec<f32>> = (0..128).map(|_| observation(&mut rng, &st)).collect();
@@ -102,27 +108,36 @@ fn model_bytes() -> Vec<u8> {
         .collect();
     let names: Vec<String> = (0..N_STATIONS).map(|i| format!("S{i:02}")).collect();
     let problem = magic_train::pipeline::mogi_problem(&names, &st).unwrap();
+    let mut bounds: Vec<[f32; 2]> = PAPER_BOUNDS
+        .iter()
+        .map(|b| [b[0] as f32, b[1] as f32])
+        .collect();
+    for e in &effects {
+        bounds.extend(
+            magic_train::pipeline::effect_bounds(e)
+                .iter()
+                .map(|b| [b[0] as f32, b[1] as f32]),
+        );
+    }
+    let n_out = bounds.len();
     let f32_model = OwnedModel {
         variant: Variant::C,
         problem,
         mean: mean.clone(),
         scale: scale.clone(),
-        bounds: PAPER_BOUNDS
-            .iter()
-            .map(|b| [b[0] as f32, b[1] as f32])
-            .collect(),
+        bounds,
         encoder: vec![
             dense(&mut rng, 64, N_OBS, Activation::Relu),
             dense(&mut rng, 32, 64, Activation::Relu),
             dense(&mut rng, 16, 32, Activation::Relu),
-            dense(&mut rng, 4, 16, Activation::Sigmoid),
+            dense(&mut rng, n_out, 16, Activation::Sigmoid),
         ],
         decoder: vec![
             dense(&mut rng, 4 * N_OBS, N_OBS, Activation::Relu),
             dense(&mut rng, N_OBS, 4 * N_OBS, Activation::Linear),
         ],
         residual_threshold: 2.0,
-        effects: vec![],
+        effects,
     };
     let calib: Vec<Vec<f32>> = rows
         .iter()
@@ -133,7 +148,15 @@ fn model_bytes() -> Vec<u8> {
                 .collect()
         })
         .collect();
-    f32_model.quantize_int8(&calib).unwrap().encode().unwrap()
+    // Calibration days spread over the years the effects tests use (ignored without effects).
+    let days: Vec<f64> = (0..calib.len())
+        .map(|i| 13_500.0 + 19.0 * i as f64)
+        .collect();
+    f32_model
+        .quantize_int8_at(&calib, &days)
+        .unwrap()
+        .encode()
+        .unwrap()
 }
 
 /// Input lines: valid observations (some with missing channels) and malformed lines; for each,
@@ -297,6 +320,124 @@ fn firmware_agrees_with_the_host() {
         Some(true),
         "SysTick follows -icount"
     );
+}
+
+/// A model with every effect family declared (latent: common mode, elevation, second source;
+/// time-dependent: seasonal, step, drift) reads a date on every line; the board must agree with
+/// `invert_at` on the host, and fit the 48 KiB flash budget (the link would fail otherwise).
+#[test]
+fn effects_models_run_on_the_firmware() {
+    if !toolchain_ready() {
+        return;
+    }
+    let mut rng = Rng(0x5DEE_CE66_D1CE_4E5B);
+    // At most MAX_EFFECTS (4) per model: two models cover the six families.
+    let first = vec![
+        OwnedEffect::CommonMode,
+        OwnedEffect::Elevation { z_ref_km: 0.1 },
+        OwnedEffect::Seasonal {
+            coef: (0..4 * N_OBS).map(|_| (2.0 * rng.next()) as f32).collect(),
+        },
+        OwnedEffect::Step {
+            station: 5,
+            epoch_day: 14_610.0, // 2010-01-01
+            offset_mm: [3.0, -2.0, 6.0],
+        },
+    ];
+    let second = vec![
+        OwnedEffect::SecondSource {
+            x_km: -4.0,
+            y_km: 3.0,
+            depth_km: 6.0,
+        },
+        OwnedEffect::Drift {
+            t0_day: 13_880.0,
+            rate: (0..N_OBS).map(|_| rng.next() as f32).collect(),
+        },
+    ];
+    check_effects_model("first", first, 4 + 3 + 1, &mut rng);
+    check_effects_model("second", second, 4 + 1, &mut rng);
+}
+
+fn check_effects_model(name: &str, effects: Vec<OwnedEffect>, n_params: usize, rng: &mut Rng) {
+    let bytes = model_bytes_with(effects);
+    let model = Model::decode(&bytes).unwrap();
+    assert!(model.needs_time());
+    let path = temp_dir().join(format!("effects-{name}.magic"));
+    std::fs::write(&path, &bytes).unwrap();
+    let elf = build_firmware(&path).expect("building the firmware with an effects model");
+
+    let st = stations();
+    let mut lines = Vec::new();
+    for i in 0..24 {
+        let day = 13_500 + 97 * i; // 2006-12 … 2013-01, across the step
+        let (y, m, d) = magic_core::time::civil_from_days(day);
+        let obs = observation(rng, &st);
+        let text: Vec<String> = obs.iter().map(|x| format!("{x}")).collect();
+        lines.push(format!("{y:04}-{m:02}-{d:02},{}", text.join(",")));
+    }
+    lines.push(format!("2010-13-01,{}", vec!["1.0"; N_OBS].join(","))); // bad date
+    lines.push(vec!["1.0"; N_OBS].join(",")); // no date
+    let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
+    let run = run_firmware(&elf, &input, TIMEOUT_S).expect("running the firmware");
+    assert!(
+        run.success,
+        "firmware failed: {:?}\n{}",
+        run.results.last(),
+        run.stderr
+    );
+    assert_eq!(
+        run.results.len(),
+        lines.len(),
+        "one output line per input line"
+    );
+
+    let mut ws = magic_core::Workspace::default();
+    let mut worst = 0f64;
+    for (line, got) in lines.iter().zip(&run.results) {
+        let mut obs = vec![0f32; N_OBS];
+        let host = magic_core::line::parse_record(line, true, &mut obs)
+            .map_err(|e| e.to_string())
+            .and_then(|day| {
+                magic_core::invert_at::<f64>(&model, &obs, day, &mut ws).map_err(|e| e.to_string())
+            });
+        match host {
+            Err(e) => assert_eq!(got, &format!("error,{e}"), "{line:?}"),
+            Ok(inv) => {
+                let fields: Vec<&str> = got.split(',').collect();
+                assert_eq!(fields.len(), inv.n_params + 3, "{got}");
+                assert_eq!(inv.n_params, n_params, "source and latent variables");
+                for j in 0..inv.n_params {
+                    let fw: f64 = fields[j].parse().unwrap();
+                    let [lo, hi] = model.bounds[j];
+                    let rel = (fw - inv.params[j]).abs() / (hi - lo) as f64;
+                    worst = worst.max(rel);
+                    assert!(
+                        rel <= 1e-4,
+                        "variable {j} of {line:?}: board {fw}, host {}",
+                        inv.params[j]
+                    );
+                }
+            }
+        }
+    }
+    let errors = run
+        .results
+        .iter()
+        .filter(|r| r.starts_with("error,"))
+        .count();
+    assert_eq!(errors, 2, "the bad and the missing date");
+    eprintln!(
+        "effects model {name} on the board: largest difference {worst:.2e} of a variable's range"
+    );
+    for k in [
+        "instructions_per_inversion",
+        "flash_bytes",
+        "stack_bytes",
+        "model_bytes",
+    ] {
+        eprintln!("  {k} = {:?}", run.cost(k));
+    }
 }
 
 #[test]
