@@ -9,6 +9,11 @@
 //!   the observation's date (per-channel annual and semiannual terms, a step at one station from an
 //!   epoch, per-channel drift).
 //!
+//! One effect belongs to the forest-spectra problem instead: **illumination** hands INFORM the
+//! true sun of each spectrum's acquisition (zenith and relative azimuth from its date, the
+//! overpass time and the site, [`crate::sun`]) in place of the fixed sun of the paper; it changes
+//! the fixed inputs of the RTM model ([`rtm_fixed_at`]), not the observation channels.
+//!
 //! Every term is generic over [`Real`] so the trainer differentiates through it exactly and the
 //! board evaluates it in f32. Times are day numbers (days since 1970-01-01, see [`crate::time`]).
 
@@ -66,6 +71,20 @@ pub enum Effect<'a> {
         #[serde(borrow)]
         rate: LeF32<'a>,
     },
+    /// RTM models only: the sun of each acquisition from its date (no latent variable, no fitted
+    /// constant): sun zenith and azimuth at `utc_hours` on the observation's day at the site,
+    /// relative azimuth to the sensor's `view_azimuth_deg`.
+    Illumination {
+        /// Site latitude (degrees north).
+        lat_deg: f32,
+        /// Site longitude (degrees east).
+        lon_deg: f32,
+        /// Acquisition time of day (hours UTC).
+        utc_hours: f32,
+        /// Azimuth of the sensor's viewing direction (degrees from north; irrelevant for a
+        /// nadir view).
+        view_azimuth_deg: f32,
+    },
 }
 
 impl Effect<'_> {
@@ -82,7 +101,10 @@ impl Effect<'_> {
     pub fn needs_time(&self) -> bool {
         matches!(
             self,
-            Effect::Seasonal { .. } | Effect::Step { .. } | Effect::Drift { .. }
+            Effect::Seasonal { .. }
+                | Effect::Step { .. }
+                | Effect::Drift { .. }
+                | Effect::Illumination { .. }
         )
     }
 
@@ -95,6 +117,7 @@ impl Effect<'_> {
             Effect::Seasonal { .. } => "seasonal",
             Effect::Step { .. } => "step",
             Effect::Drift { .. } => "drift",
+            Effect::Illumination { .. } => "illumination",
         }
     }
 
@@ -128,6 +151,9 @@ impl Effect<'_> {
             {
                 Ok(())
             }
+            Effect::Illumination { .. } => Err(Error::InvalidModel(
+                "the illumination effect belongs to RTM models, not to a GNSS network",
+            )),
             _ => Err(Error::InvalidModel(
                 "effect parameters invalid or sized for another network",
             )),
@@ -251,9 +277,85 @@ impl Effect<'_> {
                     *o += R::c(r as f64) * years;
                 }
             }
+            Effect::Illumination { .. } => {
+                return Err(Error::InvalidModel(
+                    "the illumination effect belongs to RTM models, not to a GNSS network",
+                ))
+            }
         }
         Ok(())
     }
+
+    /// Checks an effect of an RTM model: only [`Effect::Illumination`], with a site on Earth and
+    /// an hour of the day.
+    pub fn validate_rtm(&self) -> Result<(), Error> {
+        match *self {
+            Effect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            } if (-90.0..=90.0).contains(&lat_deg)
+                && (-180.0..=360.0).contains(&lon_deg)
+                && (0.0..=24.0).contains(&utc_hours)
+                && view_azimuth_deg.is_finite() =>
+            {
+                Ok(())
+            }
+            Effect::Illumination { .. } => Err(Error::InvalidModel(
+                "illumination: latitude, longitude, hour or view azimuth out of range",
+            )),
+            _ => Err(Error::InvalidModel(
+                "RTM models declare only the illumination effect",
+            )),
+        }
+    }
+}
+
+/// The fixed INFORM inputs of an observation made on day `t_day`: `fixed` with the sun zenith
+/// `tts` and the relative azimuth `psi` of every [`Effect::Illumination`] in `effects` (the
+/// others leave it unchanged). A sun within 1° of the horizon or below is an error: no forest
+/// spectrum is taken then.
+///
+/// ```
+/// use magic_core::effects::{rtm_fixed_at, Effect};
+/// use magic_core::rtm::Fixed;
+/// let sun = Effect::Illumination { lat_deg: 47.5, lon_deg: 14.5, utc_hours: 10.0, view_azimuth_deg: 0.0 };
+/// let day = magic_core::time::days_from_civil(2018, 10, 30) as f64;
+/// let f = rtm_fixed_at(&[sun], &Fixed::default(), day).unwrap();
+/// assert!(f.tts > 60.0 && f.tts < 66.0); // late October: a low sun, not the paper's 30°
+/// assert_eq!(rtm_fixed_at(&[], &Fixed::default(), day).unwrap(), Fixed::default());
+/// ```
+pub fn rtm_fixed_at(
+    effects: &[Effect<'_>],
+    fixed: &crate::rtm::Fixed,
+    t_day: f64,
+) -> Result<crate::rtm::Fixed, Error> {
+    let mut f = *fixed;
+    for e in effects {
+        if let Effect::Illumination {
+            lat_deg,
+            lon_deg,
+            utc_hours,
+            view_azimuth_deg,
+        } = *e
+        {
+            if !t_day.is_finite() {
+                return Err(Error::OutOfRange {
+                    what: "date (the model has time-dependent effects)",
+                });
+            }
+            let p = crate::sun::position(t_day, utc_hours as f64, lat_deg as f64, lon_deg as f64)?;
+            if p.zenith_deg >= 89.0 {
+                return Err(Error::OutOfRange {
+                    what: "sun zenith of the acquisition (sun at or below the horizon)",
+                });
+            }
+            f.tts = p.zenith_deg;
+            f.psi = crate::sun::relative_azimuth(p.azimuth_deg, view_azimuth_deg as f64);
+        }
+    }
+    Ok(f)
 }
 
 /// `x − ⌊x⌋` in `R`, exactly, by subtracting powers of two (Sterbenz: each subtraction is exact),
@@ -467,5 +569,46 @@ mod tests {
         }
         .validate(2)
         .is_err());
+    }
+
+    #[test]
+    fn illumination_sets_the_sun_of_rtm_models_only() {
+        let sun = Effect::Illumination {
+            lat_deg: 47.5,
+            lon_deg: 14.5,
+            utc_hours: 10.0,
+            view_azimuth_deg: 100.0,
+        };
+        assert!(sun.needs_time() && sun.n_latent() == 0);
+        assert_eq!(sun.family(), "illumination");
+        // Not a GNSS term.
+        assert!(sun.validate(2).is_err());
+        let mut out = [0.0f64; 6];
+        assert!(sun.apply(&NET, &[], 14_000.0, &mut out).is_err());
+        // An RTM term: the sun of the day, relative azimuth to the view.
+        assert!(sun.validate_rtm().is_ok());
+        assert!(Effect::CommonMode.validate_rtm().is_err());
+        let day = crate::time::days_from_civil(2018, 7, 2) as f64;
+        let f = rtm_fixed_at(&[sun], &crate::rtm::Fixed::default(), day).unwrap();
+        let p = crate::sun::position(day, 10.0, 47.5, 14.5).unwrap();
+        assert_eq!(f.tts, p.zenith_deg);
+        assert_eq!(f.psi, crate::sun::relative_azimuth(p.azimuth_deg, 100.0));
+        assert_eq!(f.sd, crate::rtm::Fixed::default().sd);
+        // Undated spectra, a site off the globe, night: errors.
+        assert!(rtm_fixed_at(&[sun], &crate::rtm::Fixed::default(), f64::NAN).is_err());
+        let night = Effect::Illumination {
+            lat_deg: 47.5,
+            lon_deg: 14.5,
+            utc_hours: 23.0,
+            view_azimuth_deg: 0.0,
+        };
+        assert!(rtm_fixed_at(&[night], &crate::rtm::Fixed::default(), day).is_err());
+        let off = Effect::Illumination {
+            lat_deg: 95.0,
+            lon_deg: 14.5,
+            utc_hours: 10.0,
+            view_azimuth_deg: 0.0,
+        };
+        assert!(off.validate_rtm().is_err());
     }
 }

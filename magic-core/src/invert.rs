@@ -440,10 +440,11 @@ pub fn forward_for<R: Real, P: Problems>(
                 expected: N_LEARNED,
                 found: params.len(),
             })?;
+            let fixed = crate::effects::rtm_fixed_at(&model.effects, fixed, t_day)?;
             model
                 .problem
                 .packed()?
-                .forward_learned(&z, fixed, *geometry, out)
+                .forward_learned(&z, &fixed, *geometry, out)
         }
     }
 }

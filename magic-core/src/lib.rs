@@ -12,6 +12,7 @@
 //! * [`rtm`] — PROSPECT-D, 4SAIL, INFORM and Sentinel-2 band integration;
 //! * [`quant`] and [`nn`] — int8 / f32 dense layers and the MLPs built from them;
 //! * [`model_file`] — the exported model, decoded without allocation;
+//! * [`sun`] — the sun's zenith and azimuth from date, time and place (illumination geometry);
 //! * [`invert`] — observations to variables, reconstruction, residual and quality flags.
 //! * [`lsq`] — the classical baseline: per-day Levenberg–Marquardt fits with the exact Jacobian.
 #![no_std]
@@ -26,6 +27,7 @@ pub mod error;
 pub mod mogi;
 pub mod real;
 pub mod rtm;
+pub mod sun;
 pub mod time;
 
 pub use error::{Error, MessageSink};

@@ -228,6 +228,9 @@ impl<'a> Problem<'a> {
     }
 }
 
+/// Why an RTM model in the reference geometry cannot declare the illumination effect.
+pub const ILLUMINATION_NEEDS_PHYSICAL: &str = "the illumination effect needs the physical geometry (the reference geometry hands INFORM cosines where angles are expected)";
+
 /// A decoded model. Weight arrays borrow from the bytes it was decoded from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Model<'a> {
@@ -475,8 +478,15 @@ impl<'a> Model<'a> {
                     });
                 }
                 let packed = self.problem.packed()?;
-                if !self.effects.is_empty() {
-                    return Err(Error::InvalidModel("RTM models declare no effects"));
+                for e in &self.effects {
+                    e.validate_rtm()?;
+                    if let (Effect::Illumination { .. }, Problem::Rtm { geometry, .. }) =
+                        (e, &self.problem)
+                    {
+                        if *geometry == Geometry::Reference {
+                            return Err(Error::InvalidModel(ILLUMINATION_NEEDS_PHYSICAL));
+                        }
+                    }
                 }
                 let f = fixed;
                 let all = [

@@ -91,6 +91,17 @@ pub enum OwnedEffect {
         /// Rates (mm/yr).
         rate: Vec<f32>,
     },
+    /// RTM: each spectrum's true sun from its date (see `magic_core::effects`).
+    Illumination {
+        /// Site latitude (degrees north).
+        lat_deg: f32,
+        /// Site longitude (degrees east).
+        lon_deg: f32,
+        /// Acquisition time (hours UTC).
+        utc_hours: f32,
+        /// Sensor view azimuth (degrees).
+        view_azimuth_deg: f32,
+    },
 }
 
 impl OwnedEffect {
@@ -131,6 +142,17 @@ impl OwnedEffect {
                 t0_day,
                 rate: LeF32(bytes),
             },
+            OwnedEffect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            } => Effect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            },
         }
     }
 
@@ -163,6 +185,17 @@ impl OwnedEffect {
             Effect::Drift { t0_day, rate } => OwnedEffect::Drift {
                 t0_day,
                 rate: rate.iter().collect(),
+            },
+            Effect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            } => OwnedEffect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
             },
         }
     }

@@ -20,8 +20,10 @@ pub mod records;
 pub mod reproduce;
 pub mod residuals;
 pub mod rtm_cli;
+pub mod rtm_loop;
 pub mod rtm_physics;
 pub mod rtm_pipeline;
+pub mod rtm_residuals;
 pub mod synth;
 pub mod train;
 

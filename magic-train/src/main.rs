@@ -135,7 +135,8 @@ enum Cmd {
         /// Data folder laid out like `shared/data/gnss` (default as for `eval`).
         #[arg(long)]
         data_dir: Option<PathBuf>,
-        /// Split the families are fitted on (the fitted families are scored on the others).
+        /// Split the families are fitted on (the fitted families are scored on the others; RTM
+        /// models: scored on the next split, train → valid, valid → test).
         #[arg(long, default_value = "train")]
         split: String,
         /// Surrogates per family for the chance level.
@@ -247,12 +248,23 @@ enum Cmd {
     },
     /// Close the loop: train, trace the residual to a missing effect, add it to F, retrain, report.
     Loop {
-        /// Problem (`mogi`).
+        /// Problem: `mogi` (GNSS) or `rtm` (Sentinel-2 forest spectra).
         #[arg(long, default_value = "mogi")]
         problem: String,
-        /// Data folder (default: $MAGIC_DATA/gnss, ../shared/data/gnss).
+        /// Data folder (default: $MAGIC_DATA/gnss or …/s2, ../shared/data/gnss or …/s2).
         #[arg(long)]
         data_dir: Option<PathBuf>,
+        /// RTM: tables folder (default: $MAGIC_DATA/rtm or ../shared/data/rtm).
+        #[arg(long)]
+        tables: Option<PathBuf>,
+        /// RTM: INFORM geometry mode (`physical`: the published equations; `reference`: the
+        /// paper's implementation, which hands INFORM cosines where angles are expected, so a
+        /// declared sun would not mean what it says).
+        #[arg(long, default_value = "physical")]
+        geometry: String,
+        /// RTM: surrogates per family in the residual analysis.
+        #[arg(long, default_value_t = 20)]
+        surrogates: usize,
         /// Report folder (Markdown, JSON, PNG).
         #[arg(long, default_value = "out/loop")]
         report: PathBuf,
@@ -394,6 +406,10 @@ enum TrainProblem {
         /// Train on the first N training spectra only (0: all).
         #[arg(long, default_value_t = 0)]
         limit: usize,
+        /// Declared effects, comma-separated: `illumination` (each spectrum's own sun from its
+        /// date at 47.5° N 14.5° E, 10:00 UTC; use with `--geometry physical`).
+        #[arg(long, value_delimiter = ',')]
+        effects: Vec<String>,
         /// Output model file (f32).
         #[arg(long)]
         out: PathBuf,
@@ -478,6 +494,7 @@ fn run(cli: Cli) -> Result<()> {
                     seed,
                     geometry,
                     limit,
+                    effects,
                     out,
                 },
         } => {
@@ -489,6 +506,7 @@ fn run(cli: Cli) -> Result<()> {
                 seed,
                 geometry,
                 limit,
+                effects,
                 out,
             })?;
         }
@@ -648,9 +666,38 @@ fn run(cli: Cli) -> Result<()> {
             json,
             plots,
         } => {
-            let data = load_gnss(data_dir.as_deref())?;
             let bytes = read_model(&model)?;
             let m = decode(&model, &bytes)?;
+            if let magic_core::Problem::Rtm { .. } = m.problem {
+                // Forest spectra: fitted on `split`, scored on the next split.
+                let held = match split.as_str() {
+                    "train" => "valid",
+                    "valid" => "test",
+                    _ => "valid",
+                };
+                let data =
+                    magic_train::data::s2::S2Data::read(&rtm_cli::locate_s2(data_dir.as_deref())?)?;
+                let opts = magic_train::rtm_residuals::RtmAnalysisOptions {
+                    fit_split: split.clone(),
+                    split: held.into(),
+                    surrogates,
+                    seed,
+                    ..Default::default()
+                };
+                let a = magic_train::rtm_residuals::analyse_rtm(&m, &data, &opts)?;
+                print!("{}", a.table());
+                eprintln!("analysis took {:.2} s", a.seconds);
+                if let Some(p) = json {
+                    std::fs::write(&p, serde_json::to_string_pretty(&a.to_json())?)
+                        .with_context(|| format!("{}: cannot write", p.display()))?;
+                }
+                if let Some(d) = plots {
+                    magic_train::rtm_residuals::write_plots(&a, &d)?;
+                    eprintln!("plots -> {}", d.display());
+                }
+                return Ok(());
+            }
+            let data = load_gnss(data_dir.as_deref())?;
             let opts = residuals::AnalysisOptions {
                 split,
                 surrogates,
@@ -786,14 +833,37 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Loop {
             problem,
             data_dir,
+            tables,
+            geometry,
+            surrogates,
             report,
             seed,
             epochs,
             rounds,
             no_classical,
         } => {
+            if problem == "rtm" {
+                let mut setup = magic_train::rtm_pipeline::RtmSetup::read(
+                    &rtm_cli::locate_s2(data_dir.as_deref())?,
+                    &magic_train::data::rtm_tables::locate(tables.as_deref())?,
+                    rtm_cli::parse_geometry(&geometry)?,
+                )?;
+                let opts = magic_train::rtm_loop::RtmLoopOptions {
+                    seed,
+                    train: TrainConfig {
+                        epochs,
+                        ..TrainConfig::s2()
+                    },
+                    max_rounds: rounds,
+                    surrogates,
+                };
+                let r = magic_train::rtm_loop::run(&mut setup, &opts, &report)?;
+                print!("{}", std::fs::read_to_string(report.join("report.md"))?);
+                eprintln!("{} rounds; report in {}", r.rounds.len(), report.display());
+                return Ok(());
+            }
             if problem != "mogi" {
-                bail!("loop --problem {problem}: only `mogi` is supported (the RTM loop needs per-spectrum illumination effects)");
+                bail!("loop --problem {problem}: expected `mogi` or `rtm`");
             }
             let data = load_gnss(data_dir.as_deref())?;
             let opts = magic_train::closed_loop::LoopOptions {

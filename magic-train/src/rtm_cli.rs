@@ -43,6 +43,8 @@ pub struct TrainArgs {
     pub geometry: String,
     /// Train on the first N training spectra only (0: all).
     pub limit: usize,
+    /// Declared effects (`illumination`).
+    pub effects: Vec<String>,
     /// Output model file.
     pub out: PathBuf,
 }
@@ -50,11 +52,16 @@ pub struct TrainArgs {
 /// `magic train rtm`.
 pub fn train(a: &TrainArgs) -> Result<()> {
     let variant = RtmVariant::parse(&a.variant)?;
-    let setup = RtmSetup::read(
+    let mut setup = RtmSetup::read(
         &locate_s2(a.data_dir.as_deref())?,
         &rtm_tables::locate(a.tables.as_deref())?,
         parse_geometry(&a.geometry)?,
     )?;
+    setup.effects = a
+        .effects
+        .iter()
+        .map(|e| crate::rtm_pipeline::rtm_effect(e))
+        .collect::<Result<_>>()?;
     let cfg = TrainConfig {
         epochs: a.epochs,
         ..TrainConfig::s2()
@@ -103,7 +110,7 @@ pub fn eval(model: &Model<'_>, data_dir: Option<&Path>, split: &str, json: bool)
 pub fn export_int8(model: &Model<'_>, data_dir: Option<&Path>) -> Result<Vec<u8>> {
     let data = S2Data::read(&locate_s2(data_dir)?)?;
     OwnedModel::from_model(model)
-        .quantize_int8(&data.train.rows.x)?
+        .quantize_int8_at(&data.train.rows.x, &data.train.rows.days())?
         .encode()
 }
 

@@ -2,13 +2,15 @@
 //! fc]` → the observed Sentinel-2 bands (reflectance), over the same packed rows the model file
 //! carries (in f64 here), with the core's exact Jacobian.
 //!
-//! The day number `t` is passed by [`crate::physics::PhysicsOp`] but not used: the geometry is
-//! the fixed one of the model (the paper's sun zenith 30°, nadir view).
+//! The day number `t` is passed by [`crate::physics::PhysicsOp`]; it matters only with the
+//! illumination effect (each spectrum's own sun, `magic_core::effects::rtm_fixed_at`); without
+//! it the geometry is the fixed one of the model (the paper's sun zenith 30°, nadir view).
 //!
 //! The Jacobian costs about 3.5 times the values, so the op's forward pass computes both while
 //! training and its backward pass reuses them ([`JacobianReuse`]).
 
 use crate::data::rtm_tables::PackedRows;
+use crate::export::OwnedEffect;
 use crate::physics::{JacobianReuse, Physics};
 use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
 use magic_core::Error;
@@ -22,6 +24,8 @@ pub struct RtmPhysics {
     pub fixed: Fixed,
     /// Geometry mode.
     pub geometry: Geometry,
+    /// Declared effects (illumination).
+    pub effects: Vec<OwnedEffect>,
     /// Jacobians of the op's forward pass kept for its backward pass.
     reuse: JacobianReuse,
 }
@@ -47,8 +51,32 @@ impl RtmPhysics {
             rows,
             fixed,
             geometry,
+            effects: vec![],
             reuse: JacobianReuse::default(),
         })
+    }
+
+    /// The same model with declared effects (checked as an RTM model checks them).
+    pub fn with_effects(mut self, effects: Vec<OwnedEffect>) -> Result<Self, Error> {
+        for e in &effects {
+            e.borrow(&[]).validate_rtm()?;
+            if e.family() == "illumination" && self.geometry == Geometry::Reference {
+                return Err(Error::InvalidModel(
+                    magic_core::model_file::ILLUMINATION_NEEDS_PHYSICAL,
+                ));
+            }
+        }
+        self.effects = effects;
+        Ok(self)
+    }
+
+    /// The fixed inputs of an observation on day `t` (the paper's fixed sun without effects).
+    pub fn fixed_at(&self, t: f64) -> Result<Fixed, Error> {
+        if self.effects.is_empty() {
+            return Ok(self.fixed);
+        }
+        let core: Vec<_> = self.effects.iter().map(|e| e.borrow(&[])).collect();
+        magic_core::effects::rtm_fixed_at(&core, &self.fixed, t)
     }
 }
 
@@ -59,12 +87,12 @@ impl Physics for RtmPhysics {
     fn n_obs(&self) -> usize {
         self.rows.bands.len()
     }
-    fn forward(&self, p: &[f64], _t: f64, out: &mut [f64]) -> Result<(), Error> {
+    fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), Error> {
         self.rows
             .model()?
-            .forward_learned(&learned(p)?, &self.fixed, self.geometry, out)
+            .forward_learned(&learned(p)?, &self.fixed_at(t)?, self.geometry, out)
     }
-    fn jacobian(&self, p: &[f64], _t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), Error> {
+    fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), Error> {
         let n = self.n_obs();
         if jac.len() != n * N_LEARNED {
             return Err(Error::SizeMismatch {
@@ -74,9 +102,13 @@ impl Physics for RtmPhysics {
             });
         }
         let mut j = [[0.0; N_LEARNED]; 16];
-        self.rows
-            .model()?
-            .jacobian(&learned(p)?, &self.fixed, self.geometry, out, &mut j[..n])?;
+        self.rows.model()?.jacobian(
+            &learned(p)?,
+            &self.fixed_at(t)?,
+            self.geometry,
+            out,
+            &mut j[..n],
+        )?;
         for (c, row) in j[..n].iter().enumerate() {
             jac[c * N_LEARNED..(c + 1) * N_LEARNED].copy_from_slice(row);
         }

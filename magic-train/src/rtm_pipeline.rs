@@ -6,7 +6,7 @@ use crate::data::gnss::Split;
 use crate::data::rtm_tables::{PackedRows, RtmTables, S2_DATA_BANDS};
 use crate::data::s2::{Extract, S2Data, S2Split};
 use crate::eval::{evaluate, EvalResult};
-use crate::export::OwnedModel;
+use crate::export::{OwnedEffect, OwnedModel};
 use crate::nets::{mse, to_tensor, Net};
 use crate::physics::Physics;
 use crate::pipeline::residual_threshold;
@@ -65,8 +65,34 @@ pub const PAPER_TABLE3: [(RtmVariant, [f64; 3]); 4] = [
 /// Physics-only test MSE of the paper's released C model (`pretrained_rtm_c_test_outputs.csv`).
 pub const PAPER_C_PHYSICS_ONLY: f64 = 1.04;
 
-/// Everything an RTM job needs: the spectra, the tables' rows for the 11 bands, fixed inputs and
-/// geometry.
+/// The representative site of the S2 data (its README: 47.5° N, 14.5° E puts the sun within about
+/// 2° of each site's own) and the overpass time (10:30 local mean solar time, descending: about
+/// 10:00 UTC over Austria).
+pub const S2_SITE: [f32; 2] = [47.5, 14.5];
+/// Overpass time of the S2 data (hours UTC).
+pub const S2_OVERPASS_UTC: f32 = 10.0;
+
+/// The illumination effect for the S2 data: each spectrum's sun at [`S2_SITE`] and
+/// [`S2_OVERPASS_UTC`] on its date; nadir view (the view azimuth then does not matter).
+pub fn s2_illumination() -> OwnedEffect {
+    OwnedEffect::Illumination {
+        lat_deg: S2_SITE[0],
+        lon_deg: S2_SITE[1],
+        utc_hours: S2_OVERPASS_UTC,
+        view_azimuth_deg: 0.0,
+    }
+}
+
+/// An RTM effect by family name (`illumination`).
+pub fn rtm_effect(name: &str) -> Result<OwnedEffect> {
+    match name {
+        "illumination" => Ok(s2_illumination()),
+        other => bail!("unknown RTM effect `{other}` (expected illumination)"),
+    }
+}
+
+/// Everything an RTM job needs: the spectra, the tables' rows for the 11 bands, fixed inputs,
+/// geometry and declared effects.
 pub struct RtmSetup {
     /// The S2 splits.
     pub data: S2Data,
@@ -76,6 +102,8 @@ pub struct RtmSetup {
     pub fixed: Fixed,
     /// Geometry mode.
     pub geometry: Geometry,
+    /// Declared effects (illumination).
+    pub effects: Vec<OwnedEffect>,
 }
 
 impl RtmSetup {
@@ -89,13 +117,15 @@ impl RtmSetup {
             rows,
             fixed: paper_fixed(),
             geometry,
+            effects: vec![],
         })
     }
 
     /// The forward model for training.
     pub fn physics(&self) -> Result<RtmPhysics> {
         RtmPhysics::new(self.rows.clone(), self.fixed, self.geometry)
-            .map_err(|e| anyhow!("RTM tables: {e}"))
+            .and_then(|p| p.with_effects(self.effects.clone()))
+            .map_err(|e| anyhow!("RTM model: {e}"))
     }
 
     /// The learned variables' bounds (paper Table 1).
@@ -128,6 +158,9 @@ pub fn train_rtm(
 ) -> Result<(OwnedModel, TrainLog)> {
     let mut rng = StdRng::seed_from_u64(seed);
     let d = &setup.data;
+    if variant == RtmVariant::D && !setup.effects.is_empty() {
+        bail!("the regressor D is trained on simulated spectra without dates: no effects");
+    }
     let physics: Arc<dyn Physics> = Arc::new(setup.physics()?);
     let core_variant = match variant {
         RtmVariant::A => Variant::A,
@@ -163,7 +196,7 @@ pub fn train_rtm(
         )?
     };
     let problem = setup.rows.problem(setup.fixed, setup.geometry);
-    let mut model = OwnedModel::from_net(&net, problem, vec![])?;
+    let mut model = OwnedModel::from_net(&net, problem, setup.effects.clone())?;
     model.residual_threshold = residual_threshold(&model, &valid.rows.x, &valid.rows.days())?;
     Ok((model, log))
 }
