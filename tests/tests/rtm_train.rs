@@ -318,6 +318,7 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
     assert_eq!(run.results.len(), rows.len());
     let m = Model::decode(bytes).unwrap();
     let mut ws = Workspace::default();
+    let mut worst_res = 0f64;
     for (row, line) in rows.iter().zip(&run.results) {
         let inv = invert::<f64>(&m, row, &mut ws).unwrap();
         let got: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
@@ -329,7 +330,17 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
                 "variable {j}: board {a}, host {e}"
             );
         }
+        // The residual RMS (reflectance) of the board's f32 INFORM reconstruction against the
+        // host's f64 one: it differs by at most the largest difference of the reconstructions.
+        let res = got[inv.n_params];
+        worst_res = worst_res.max((res - inv.residual_rms).abs());
+        assert!(
+            (res - inv.residual_rms).abs() <= 1e-4,
+            "residual: board {res}, host {}",
+            inv.residual_rms
+        );
     }
+    eprintln!("RTM residual RMS, board vs host: largest difference {worst_res:.2e}");
     eprintln!(
         "RTM on the board: {:?} instructions per inversion, stack {:?} bytes, flash {:?} bytes",
         run.instructions_per_inversion, run.stack_bytes, run.flash_bytes
