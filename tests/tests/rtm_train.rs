@@ -482,3 +482,64 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
         .unwrap();
     assert!(ill.effect.is_none() && ill.variance_explained == 0.0);
 }
+
+/// An RTM model with the illumination effect (physical geometry) reads a date on each line on
+/// the board, and the board's sun (computed there from the date) gives the host's results.
+#[test]
+fn rtm_illumination_model_runs_on_the_firmware() {
+    let Some((model, _)) = trained_b() else {
+        return;
+    };
+    if let Err(e) = magic_train::qemu::ensure_toolchain() {
+        eprintln!("notice: no firmware toolchain ({e}); skipping");
+        return;
+    }
+    let mut m = model.clone();
+    if let Problem::Rtm { geometry, .. } = &mut m.problem {
+        *geometry = Geometry::Physical;
+    }
+    m.effects = vec![magic_train::rtm_pipeline::s2_illumination()];
+    let bytes = m.encode().unwrap();
+    let decoded = Model::decode(&bytes).unwrap();
+    assert!(decoded.needs_time());
+    let s = setup().unwrap();
+    let dir = std::env::temp_dir().join(format!("magic-rtm-ill-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("rtm_ill.magic");
+    std::fs::write(&path, &bytes).unwrap();
+    let elf = magic_train::qemu::build_firmware(&path).unwrap();
+    let test = &s.data.test;
+    let idx: Vec<usize> = (0..test.len()).step_by(test.len() / 6).take(6).collect();
+    let lines: Vec<String> = idx
+        .iter()
+        .map(|&i| {
+            let date = test.rows.dates[i].replace('.', "-");
+            let vals: Vec<String> = physical(&s.data, &test.rows.x[i])
+                .iter()
+                .map(|v| format!("{v}"))
+                .collect();
+            format!("{date},{}", vals.join(","))
+        })
+        .collect();
+    let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
+    let run = magic_train::qemu::run_firmware(&elf, &input, 300).unwrap();
+    assert!(run.success, "firmware failed: {}", run.stderr);
+    assert_eq!(run.results.len(), lines.len());
+    let mut ws = Workspace::default();
+    for (line, got) in lines.iter().zip(&run.results) {
+        let mut obs = vec![0f32; 11];
+        let day = magic_core::line::parse_record(line, true, &mut obs).unwrap();
+        let inv = magic_core::invert_at::<f64>(&decoded, &obs, day, &mut ws).unwrap();
+        let got: Vec<f64> = got.split(',').map(|f| f.parse().unwrap()).collect();
+        assert_eq!(got.len(), inv.n_params + 3);
+        for j in 0..inv.n_params {
+            let (a, e) = (got[j], inv.params[j]);
+            assert!(
+                (a - e).abs() <= 1e-3 * e.abs().max(1e-2),
+                "{line}: variable {j}: board {a}, host {e}"
+            );
+        }
+        assert!((got[inv.n_params] - inv.residual_rms).abs() <= 1e-4);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
