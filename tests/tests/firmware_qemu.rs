@@ -206,6 +206,30 @@ fn input_lines() -> Vec<(String, bool)> {
     lines
 }
 
+/// Checks a board's result row against the host's inversion: as many fields, every variable
+/// within 1e-4 of its range. Returns the largest difference (fraction of the range).
+fn variables_agree(
+    model: &Model<'_>,
+    line: &str,
+    fields: &[&str],
+    inv: &magic_core::Inversion<f64>,
+) -> f64 {
+    assert_eq!(fields.len(), inv.n_params + 3, "{}", fields.join(","));
+    let mut worst = 0f64;
+    for j in 0..inv.n_params {
+        let fw: f64 = fields[j].parse().unwrap();
+        let [lo, hi] = model.bounds[j];
+        let rel = (fw - inv.params[j]).abs() / (hi - lo) as f64;
+        worst = worst.max(rel);
+        assert!(
+            rel <= 1e-4,
+            "variable {j} of {line:?}: board {fw}, host {} ({rel:.2e} of the range)",
+            inv.params[j]
+        );
+    }
+    worst
+}
+
 fn temp_dir() -> PathBuf {
     let dir = std::env::temp_dir().join(format!("magic-firmware-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -268,18 +292,7 @@ fn firmware_agrees_with_the_host() {
                     "firmware rejected {line:?}: {got}"
                 );
                 let fields: Vec<&str> = got.split(',').collect();
-                assert_eq!(fields.len(), inv.n_params + 3, "{got}");
-                for j in 0..inv.n_params {
-                    let fw: f64 = fields[j].parse().unwrap();
-                    let [lo, hi] = model.bounds[j];
-                    let rel = (fw - inv.params[j]).abs() / (hi - lo) as f64;
-                    worst = worst.max(rel);
-                    assert!(
-                        rel <= 1e-4,
-                        "variable {j} of {line:?}: board {fw}, host {} ({rel:.2e} of the range)",
-                        inv.params[j]
-                    );
-                }
+                worst = worst.max(variables_agree(&model, line, &fields, &inv));
                 assert_eq!(
                     fields[inv.n_params + 1].parse::<u8>().unwrap()
                         & !magic_core::Flags::HIGH_RESIDUAL,
@@ -405,19 +418,8 @@ fn check_effects_model(name: &str, effects: Vec<OwnedEffect>, n_params: usize, r
             Err(e) => assert_eq!(got, &format!("error,{e}"), "{line:?}"),
             Ok(inv) => {
                 let fields: Vec<&str> = got.split(',').collect();
-                assert_eq!(fields.len(), inv.n_params + 3, "{got}");
                 assert_eq!(inv.n_params, n_params, "source and latent variables");
-                for j in 0..inv.n_params {
-                    let fw: f64 = fields[j].parse().unwrap();
-                    let [lo, hi] = model.bounds[j];
-                    let rel = (fw - inv.params[j]).abs() / (hi - lo) as f64;
-                    worst = worst.max(rel);
-                    assert!(
-                        rel <= 1e-4,
-                        "variable {j} of {line:?}: board {fw}, host {}",
-                        inv.params[j]
-                    );
-                }
+                worst = worst.max(variables_agree(&model, line, &fields, &inv));
             }
         }
     }
