@@ -22,8 +22,10 @@
 //! * latent families, whose variables the encoder would infer every day (`common_mode`,
 //!   `elevation`, `second_source`), predict each station from the other stations (leave one
 //!   station out) on the neighbouring days (±[`NEIGHBOUR_WINDOWS`] days, the day itself excluded,
-//!   best window taken). A day-to-day white network jitter is noise, not an effect: only a term
-//!   that persists from day to day and is shared by the network scores;
+//!   best window taken), on the residuals less their running mean over ±[`LATENT_HIGHPASS_DAYS`]
+//!   days (the few multi-year cycles of each station's red noise make chance coherence large and
+//!   poorly represented by the surrogates). A day-to-day white network jitter is noise, not an
+//!   effect: only a term that persists from day to day and is shared by the network scores;
 //! * fitted families, constants applied as a function of the date (`seasonal`, `step`, `drift`),
 //!   are cross-validated over [`FOLDS`] contiguous blocks of the analysed split (fitted without a
 //!   block, scored on it) and fitted on the whole split and scored on the other splits.
@@ -57,6 +59,14 @@ use std::path::Path;
 /// Days on each side of a day whose residuals predict it in the latent families' score (the
 /// best of these windows is taken: from weather-like terms to slow transients).
 pub const NEIGHBOUR_WINDOWS: [usize; 3] = [3, 10, 30];
+/// Half-width (days) of the running mean removed from the residuals before the latent families
+/// are scored (see [`highpass`]): they are judged on variations faster than about two years.
+/// Slower ones are dominated by each station's own red noise (monument and reference-frame
+/// wander), of which a split of a few years holds only a few independent cycles: chance coherence
+/// between stations is then large, and the sign/time-reversal surrogates, which can only rearrange
+/// those few cycles, understate how large it gets. Weather-like terms, seasons (a whole number of
+/// cycles in the window) and transients of up to a year or two are kept.
+pub const LATENT_HIGHPASS_DAYS: usize = 365;
 /// Smallest excess over chance (share of residual variance) that counts as a discovery.
 pub const MIN_EXCESS: f64 = 0.005;
 /// Standard deviations above the surrogates' mean (square-root scale) a significant score must
@@ -849,6 +859,8 @@ fn latent_scores(
     el_p: &[f64],
 ) -> LatentScores {
     let ns = res.ns();
+    // Scored on the variations faster than about two years (see `LATENT_HIGHPASS_DAYS`).
+    let r = &highpass(r, res.nc(), LATENT_HIGHPASS_DAYS);
     let xs: Vec<(usize, Cross)> = NEIGHBOUR_WINDOWS
         .iter()
         .map(|&w| (w, cross(r, res.nc(), w)))
@@ -870,6 +882,27 @@ fn latent_scores(
     }
     if !grid.is_empty() {
         out.ss = search_source(res, &xs, grid, patterns);
+    }
+    out
+}
+
+/// Every channel less its running mean over ±h days (the mean of the days available at the ends):
+/// variations slower than about 2h days removed, faster ones kept.
+fn highpass(r: &[f64], nc: usize, h: usize) -> Vec<f64> {
+    let t_n = r.len() / nc;
+    let mut pre = vec![0.0; (t_n + 1) * nc];
+    for t in 0..t_n {
+        for c in 0..nc {
+            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
+        }
+    }
+    let mut out = r.to_vec();
+    for t in 0..t_n {
+        let (lo, hi) = (t.saturating_sub(h), (t + h + 1).min(t_n));
+        let k = (hi - lo) as f64;
+        for c in 0..nc {
+            out[t * nc + c] -= (pre[hi * nc + c] - pre[lo * nc + c]) / k;
+        }
     }
     out
 }
@@ -2253,6 +2286,37 @@ mod tests {
     fn noise(n: usize, seed: u64) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
         (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    #[test]
+    fn highpass_removes_slow_variations_and_keeps_fast_ones() {
+        // Two channels over 1 900 days: a constant plus a linear trend (slow), and a 60-day
+        // sinusoid (fast).
+        let (n, h) = (1900usize, LATENT_HIGHPASS_DAYS);
+        let r: Vec<f64> = (0..n)
+            .flat_map(|t| {
+                let t = t as f64;
+                [3.0 + 0.01 * t, (std::f64::consts::TAU * t / 60.0).sin()]
+            })
+            .collect();
+        let out = highpass(&r, 2, h);
+        // Away from the ends the running mean of a trend is the trend itself.
+        for t in h..n - h {
+            assert!(out[2 * t].abs() < 1e-9, "day {t}: {}", out[2 * t]);
+        }
+        // The fast channel keeps its variance (a running mean over about 12 cycles is small; the
+        // partial cycle in each window leaves a few percent).
+        let var = |c: usize, v: &[f64]| (0..n).map(|t| v[2 * t + c].powi(2)).sum::<f64>();
+        let kept = var(1, &out) / var(1, &r);
+        assert!((kept - 1.0).abs() < 0.05, "fast variance kept: {kept}");
+        // The slow channel loses nearly all of its variance about its mean.
+        let m = (0..n).map(|t| r[2 * t]).sum::<f64>() / n as f64;
+        let slow = (0..n).map(|t| (r[2 * t] - m).powi(2)).sum::<f64>();
+        assert!(
+            var(0, &out) < 0.05 * slow,
+            "slow variance kept: {}",
+            var(0, &out) / slow
+        );
     }
 
     #[test]
