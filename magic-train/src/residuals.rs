@@ -146,6 +146,37 @@ pub struct Candidate {
 }
 
 impl Candidate {
+    /// A family's candidate from its held-out score and its surrogates' scores: the chance level
+    /// is their `quantile`, floored at zero; significant when the score exceeds it by more than
+    /// the margin — the surrogates' mean plus [`SD_MARGIN`] standard deviations on the
+    /// square-root scale (where the scores of noise are close to Gaussian), and at least
+    /// [`MIN_EXCESS`].
+    pub fn from_scores(
+        family: &str,
+        score: f64,
+        chance: Vec<f64>,
+        quantile_level: f64,
+        params: serde_json::Value,
+        effect: Option<OwnedEffect>,
+    ) -> Candidate {
+        let chance_level = quantile(&chance, quantile_level).max(0.0);
+        let chance_sd = sd(&chance);
+        let roots: Vec<f64> = chance.iter().map(|v| v.max(0.0).sqrt()).collect();
+        let t = roots.iter().sum::<f64>() / roots.len().max(1) as f64 + SD_MARGIN * sd(&roots);
+        let margin = MIN_EXCESS.max(t * t - chance_level);
+        Candidate {
+            family: family.into(),
+            variance_explained: score,
+            chance_level,
+            significant: score - chance_level > margin,
+            params,
+            effect,
+            chance_sd,
+            margin,
+            surrogate_scores: chance,
+        }
+    }
+
     /// Score minus chance level (the ranking key).
     pub fn excess(&self) -> f64 {
         self.variance_explained - self.chance_level
@@ -1659,24 +1690,7 @@ pub fn analyse_residuals(res: &Residuals, opts: &AnalysisOptions) -> Result<Anal
               chance: Vec<f64>,
               params: serde_json::Value,
               effect: Option<OwnedEffect>| {
-        let chance_level = quantile(&chance, opts.quantile).max(0.0);
-        let chance_sd = sd(&chance);
-        // Threshold on the square-root scale (where the scores of noise are close to Gaussian):
-        // mean + SD_MARGIN standard deviations of the surrogates' root scores.
-        let roots: Vec<f64> = chance.iter().map(|v| v.max(0.0).sqrt()).collect();
-        let t = roots.iter().sum::<f64>() / roots.len().max(1) as f64 + SD_MARGIN * sd(&roots);
-        let margin = MIN_EXCESS.max(t * t - chance_level);
-        Candidate {
-            family: family.into(),
-            variance_explained: score,
-            chance_level,
-            significant: score - chance_level > margin,
-            params,
-            effect,
-            chance_sd,
-            margin,
-            surrogate_scores: chance,
-        }
+        Candidate::from_scores(family, score, chance, opts.quantile, params, effect)
     };
     let mut effects = vec![
         mk(
@@ -1942,13 +1956,10 @@ fn round3(v: f64) -> f64 {
 // Plots (PNG through `crate::plots`: plotters' bitmap backend with a compiled-in font, so nothing
 // but crates is needed to build or to draw).
 
-/// Writes `effects.png` (each family's held-out score as a bar, its chance level as a tick),
-/// `residual_pattern.png` (the dominant residual pattern on the network: horizontal arrows, the
-/// vertical as colour) and `residual_rms.png` (residual RMS per station, all components).
-pub fn write_plots(a: &Analysis, dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let labels: Vec<String> = a
-        .effects
+/// A bar per candidate: the share explained (%), a tick at its chance level, `*` when
+/// significant.
+pub fn effects_chart(path: &Path, title: &str, effects: &[Candidate]) -> Result<()> {
+    let labels: Vec<String> = effects
         .iter()
         .map(|c| {
             if c.significant {
@@ -1958,21 +1969,26 @@ pub fn write_plots(a: &Analysis, dir: &Path) -> Result<()> {
             }
         })
         .collect();
-    let values: Vec<f64> = a
-        .effects
+    let values: Vec<f64> = effects
         .iter()
         .map(|c| 100.0 * c.variance_explained)
         .collect();
-    let chance: Vec<f64> = a.effects.iter().map(|c| 100.0 * c.chance_level).collect();
-    crate::plots::bar_chart(
+    let chance: Vec<f64> = effects.iter().map(|c| 100.0 * c.chance_level).collect();
+    crate::plots::bar_chart(path, title, &labels, &values, &chance)
+}
+
+/// Writes `effects.png` (each family's held-out score as a bar, its chance level as a tick),
+/// `residual_pattern.png` (the dominant residual pattern on the network: horizontal arrows, the
+/// vertical as colour) and `residual_rms.png` (residual RMS per station, all components).
+pub fn write_plots(a: &Analysis, dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    effects_chart(
         &dir.join("effects.png"),
         &format!(
             "Residual variance explained on held-out data, % ({}; tick: chance, *: significant)",
             a.split
         ),
-        &labels,
-        &values,
-        &chance,
+        &a.effects,
     )?;
     let st: Vec<(String, f64, f64)> = a
         .names

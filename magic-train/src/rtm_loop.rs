@@ -126,10 +126,11 @@ fn scores(model: &OwnedModel, setup: &RtmSetup) -> Result<(RtmScores, Vec<u8>)> 
     ))
 }
 
-fn train_pair(
-    setup: &RtmSetup,
-    opts: &RtmLoopOptions,
-) -> Result<((RtmScores, Vec<u8>), (RtmScores, Vec<u8>))> {
+/// A trained model's scores and its model-file bytes.
+type Scored = (RtmScores, Vec<u8>);
+
+/// B and C trained on `setup`.
+fn train_pair(setup: &RtmSetup, opts: &RtmLoopOptions) -> Result<(Scored, Scored)> {
     let d = &setup.data;
     let (bm, _) = train_rtm(
         setup,

@@ -33,12 +33,10 @@
 //! right one; the part of the pattern shared by all dates stays in the chance level), a random
 //! sign per fitting spectrum (`band_offset`), species labels permuted among the fitting spectra
 //! (`species`: what is left is the band offset shared by all species). Significance as in
-//! [`crate::residuals`]: above the surrogates' mean by [`SD_MARGIN`] standard deviations on the
-//! square-root scale and above the chance level by at least [`MIN_EXCESS`].
+//! [`crate::residuals`] ([`Candidate::from_scores`]).
 
 use crate::data::s2::{S2Data, S2Split};
-use crate::export::OwnedEffect;
-use crate::residuals::{Candidate, MIN_EXCESS, SD_MARGIN};
+use crate::residuals::{effects_chart, Candidate};
 use crate::rtm_pipeline::s2_illumination;
 use anyhow::{anyhow, bail, Result};
 use magic_core::effects::rtm_fixed_at;
@@ -386,7 +384,11 @@ fn spectra(
             // Orthonormal basis of the columns (modified Gram–Schmidt, rank-revealing).
             let mut q: Vec<Vec<f64>> = Vec::new();
             for k in 0..N_LEARNED {
-                let mut v: Vec<f64> = (0..nb).map(|c| jac[c][k] / scale(c)).collect();
+                let mut v: Vec<f64> = jac
+                    .iter()
+                    .enumerate()
+                    .map(|(c, row)| row[k] / scale(c))
+                    .collect();
                 let n0 = v.iter().map(|a| a * a).sum::<f64>().sqrt();
                 for _ in 0..2 {
                     for c in &q {
@@ -424,51 +426,6 @@ fn spectra(
             Ok(s)
         })
         .collect()
-}
-
-fn quantile(v: &[f64], q: f64) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    if s.is_empty() {
-        return 0.0;
-    }
-    let k = ((s.len() - 1) as f64 * q).round() as usize;
-    s[k.min(s.len() - 1)]
-}
-
-fn mean_sd(v: &[f64]) -> (f64, f64) {
-    let n = v.len().max(1) as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    (m, var.sqrt())
-}
-
-/// A candidate from its score and surrogate scores (the significance rule of
-/// [`crate::residuals`]).
-fn candidate(
-    family: &str,
-    score: f64,
-    chance: Vec<f64>,
-    quantile_level: f64,
-    params: serde_json::Value,
-    effect: Option<OwnedEffect>,
-) -> Candidate {
-    let chance_level = quantile(&chance, quantile_level).max(0.0);
-    let roots: Vec<f64> = chance.iter().map(|v| v.max(0.0).sqrt()).collect();
-    let (m, sd) = mean_sd(&roots);
-    let t = m + SD_MARGIN * sd;
-    let margin = MIN_EXCESS.max(t * t - chance_level);
-    Candidate {
-        family: family.into(),
-        variance_explained: score,
-        chance_level,
-        significant: score - chance_level > margin,
-        params,
-        effect,
-        chance_sd: mean_sd(&chance).1,
-        margin,
-        surrogate_scores: chance,
-    }
 }
 
 /// Analyses the residuals of an RTM model (B or C) on the S2 data.
@@ -577,7 +534,7 @@ pub fn analyse_rtm(
         "sun_zenith_deg": date_names.iter().zip(&zeniths).map(|(d, z)| (d.clone(), (z * 100.0).round() / 100.0)).collect::<BTreeMap<_, _>>(),
         "declared": declared,
     });
-    let mut effects = vec![candidate(
+    let mut effects = vec![Candidate::from_scores(
         "illumination",
         ill,
         ill_chance,
@@ -613,7 +570,7 @@ pub fn analyse_rtm(
                 .collect()
         })
         .unwrap_or_default();
-    effects.push(candidate(
+    effects.push(Candidate::from_scores(
         "band_offset",
         band,
         band_chance,
@@ -643,7 +600,7 @@ pub fn analyse_rtm(
             })
         })
         .collect();
-    effects.push(candidate(
+    effects.push(Candidate::from_scores(
         "species",
         spec,
         spec_chance,
@@ -690,32 +647,13 @@ pub fn analyse_rtm(
 pub fn write_plots(a: &RtmAnalysis, dir: &std::path::Path) -> Result<()> {
     use anyhow::Context as _;
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let labels: Vec<String> = a
-        .effects
-        .iter()
-        .map(|c| {
-            if c.significant {
-                format!("{} *", c.family)
-            } else {
-                c.family.clone()
-            }
-        })
-        .collect();
-    let values: Vec<f64> = a
-        .effects
-        .iter()
-        .map(|c| 100.0 * c.variance_explained)
-        .collect();
-    let chance: Vec<f64> = a.effects.iter().map(|c| 100.0 * c.chance_level).collect();
-    crate::plots::bar_chart(
+    effects_chart(
         &dir.join("effects.png"),
         &format!(
             "Projected residual explained on {}, % (tick: chance, *: significant)",
             a.splits[1]
         ),
-        &labels,
-        &values,
-        &chance,
+        &a.effects,
     )?;
     let days: Vec<f64> = a
         .dates
