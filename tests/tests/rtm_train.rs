@@ -231,9 +231,12 @@ fn corrupt_and_inconsistent_rtm_files_are_errors() {
         o.bounds.pop();
     });
     assert!(!e.is_empty());
-    // Declared effects are a Mogi notion.
+    // GNSS effects are not RTM effects; illumination needs the physical geometry (this model is
+    // in the reference geometry).
     let e = with(&|o| o.effects.push(magic_train::export::OwnedEffect::CommonMode));
-    assert!(e.contains("effects"), "{e}");
+    assert!(e.contains("only the illumination effect"), "{e}");
+    let e = with(&|o| o.effects.push(magic_train::rtm_pipeline::s2_illumination()));
+    assert!(e.contains("physical geometry"), "{e}");
 }
 
 #[test]
