@@ -559,7 +559,16 @@ mod tests {
     fn tmp(name: &str) -> std::path::PathBuf {
         let d = match std::env::var_os("MAGIC_PLOTS_DIR") {
             Some(d) => std::path::PathBuf::from(d),
-            None => std::env::temp_dir().join(format!("magic-plots-{}", std::process::id())),
+            // One folder per test (tests run in parallel threads named after them), so that one
+            // test's clean-up never removes a folder another is writing into.
+            None => std::env::temp_dir().join(format!(
+                "magic-plots-{}-{}",
+                std::process::id(),
+                std::thread::current()
+                    .name()
+                    .unwrap_or("main")
+                    .replace(|c: char| !c.is_ascii_alphanumeric(), "_")
+            )),
         };
         std::fs::create_dir_all(&d).unwrap();
         d.join(name)
@@ -570,7 +579,6 @@ mod tests {
             for n in names {
                 std::fs::remove_file(tmp(n)).ok();
             }
-            // Succeeds for the last test to finish (the folder must be empty).
             std::fs::remove_dir(tmp("x").parent().unwrap()).ok();
         }
     }
