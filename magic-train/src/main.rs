@@ -152,6 +152,25 @@ enum Cmd {
         #[arg(long)]
         plots: Option<PathBuf>,
     },
+    /// The loop on synthetic data: for every scenario, generate the data (one seed), run `magic
+    /// loop` on it and print what it added and the test MSE before and after.
+    SynthLoop {
+        /// Scenarios, comma-separated (default: all).
+        #[arg(long, value_delimiter = ',')]
+        scenarios: Vec<String>,
+        /// Seed of the data and the training.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Maximum epochs per training.
+        #[arg(long, default_value_t = 100)]
+        epochs: usize,
+        /// Most effects to add.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Folder for each scenario's loop report.
+        #[arg(long, default_value = "out/synth-loop")]
+        out: PathBuf,
+    },
     /// Check the residual analysis on synthetic data: for every scenario and seed, generate the
     /// data, train a B model briefly, analyse it and compare with the injected truth.
     SynthCheck {
@@ -656,6 +675,71 @@ fn run(cli: Cli) -> Result<()> {
                 s.data.source,
                 out.display()
             );
+        }
+        Cmd::SynthLoop {
+            scenarios,
+            seed,
+            epochs,
+            rounds,
+            out,
+        } => {
+            let scs: Vec<synth::Scenario> = if scenarios.is_empty() {
+                synth::Scenario::ALL.to_vec()
+            } else {
+                scenarios
+                    .iter()
+                    .map(|s| synth::Scenario::parse(s))
+                    .collect::<Result<_>>()?
+            };
+            let opts = magic_train::closed_loop::LoopOptions {
+                seed,
+                train: TrainConfig {
+                    epochs,
+                    progress: false,
+                    ..TrainConfig::gnss()
+                },
+                max_rounds: rounds,
+                classical: false,
+            };
+            let mut table = String::from(
+                "| injected | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|\n",
+            );
+            for sc in scs {
+                let s = synth::generate(sc, seed);
+                let dir = out.join(sc.name());
+                eprintln!("scenario {} (seed {seed})", sc.name());
+                let r = magic_train::closed_loop::run(&s.data, &opts, &dir)?;
+                std::fs::write(
+                    dir.join("truth.json"),
+                    serde_json::to_string_pretty(&s.truth)?,
+                )?;
+                let (first, last) = (&r[0], &r[r.len() - 1]);
+                let added: Vec<String> = r
+                    .iter()
+                    .filter_map(|x| x.added.as_ref())
+                    .map(|a| {
+                        format!(
+                            "{} ({:.3} vs {:.3})",
+                            a.family, a.variance_explained, a.chance_level
+                        )
+                    })
+                    .collect();
+                table += &format!(
+                    "| {} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
+                    sc.name(),
+                    if added.is_empty() {
+                        "none".to_string()
+                    } else {
+                        added.join(", ")
+                    },
+                    first.b.mse[2],
+                    last.b.mse[2],
+                    first.c.mse[2],
+                    last.c.mse[2]
+                );
+            }
+            print!("{table}");
+            std::fs::write(out.join("table.md"), &table)?;
         }
         Cmd::Residuals {
             model,
