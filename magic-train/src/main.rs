@@ -683,14 +683,7 @@ fn run(cli: Cli) -> Result<()> {
             rounds,
             out,
         } => {
-            let scs: Vec<synth::Scenario> = if scenarios.is_empty() {
-                synth::Scenario::ALL.to_vec()
-            } else {
-                scenarios
-                    .iter()
-                    .map(|s| synth::Scenario::parse(s))
-                    .collect::<Result<_>>()?
-            };
+            let scs = synth::Scenario::parse_list(&scenarios)?;
             let opts = magic_train::closed_loop::LoopOptions {
                 seed,
                 train: TrainConfig {
@@ -807,14 +800,7 @@ fn run(cli: Cli) -> Result<()> {
             epochs,
             json,
         } => {
-            let scs: Vec<synth::Scenario> = if scenarios.is_empty() {
-                synth::Scenario::ALL.to_vec()
-            } else {
-                scenarios
-                    .iter()
-                    .map(|s| synth::Scenario::parse(s))
-                    .collect::<Result<_>>()?
-            };
+            let scs = synth::Scenario::parse_list(&scenarios)?;
             let cfg = TrainConfig {
                 epochs,
                 progress: false,

@@ -177,6 +177,23 @@ impl Candidate {
         }
     }
 
+    /// The candidate as reported (`family`, `variance_explained`, `chance_level`, `significant`,
+    /// `params`, and `excess`, `margin`, `declarable` — whether it can be added to F — and the
+    /// surrogate scores).
+    pub fn to_json(&self) -> serde_json::Value {
+        json!({
+            "family": self.family,
+            "variance_explained": self.variance_explained,
+            "chance_level": self.chance_level,
+            "significant": self.significant,
+            "params": self.params,
+            "excess": self.excess(),
+            "margin": self.margin,
+            "declarable": self.effect.is_some(),
+            "surrogate_scores": self.surrogate_scores,
+        })
+    }
+
     /// Score minus chance level (the ranking key).
     pub fn excess(&self) -> f64 {
         self.variance_explained - self.chance_level
@@ -226,16 +243,7 @@ impl Analysis {
     /// "significant", "params"}, …], …}`).
     pub fn to_json(&self) -> serde_json::Value {
         json!({
-            "effects": self.effects.iter().map(|c| json!({
-                "family": c.family,
-                "variance_explained": c.variance_explained,
-                "chance_level": c.chance_level,
-                "significant": c.significant,
-                "params": c.params,
-                "excess": c.excess(),
-                "margin": c.margin,
-                "surrogate_scores": c.surrogate_scores,
-            })).collect::<Vec<_>>(),
+            "effects": self.effects.iter().map(Candidate::to_json).collect::<Vec<_>>(),
             "residual_variance": self.residual_variance,
             "residual_mse": self.residual_mse,
             "split": self.split,

@@ -154,17 +154,7 @@ impl RtmAnalysis {
     /// "significant", "params"}, …], …}`).
     pub fn to_json(&self) -> serde_json::Value {
         json!({
-            "effects": self.effects.iter().map(|c| json!({
-                "family": c.family,
-                "variance_explained": c.variance_explained,
-                "chance_level": c.chance_level,
-                "significant": c.significant,
-                "params": c.params,
-                "excess": c.excess(),
-                "margin": c.margin,
-                "declarable": c.effect.is_some(),
-                "surrogate_scores": c.surrogate_scores,
-            })).collect::<Vec<_>>(),
+            "effects": self.effects.iter().map(Candidate::to_json).collect::<Vec<_>>(),
             "fit_split": self.splits[0],
             "split": self.splits[1],
             "n": self.n,

@@ -89,6 +89,14 @@ impl Scenario {
         }
     }
 
+    /// Parses a list of names; an empty list is every scenario.
+    pub fn parse_list(names: &[String]) -> Result<Vec<Scenario>> {
+        if names.is_empty() {
+            return Ok(Scenario::ALL.to_vec());
+        }
+        names.iter().map(|s| Scenario::parse(s)).collect()
+    }
+
     /// Parses a scenario name.
     pub fn parse(name: &str) -> Result<Scenario> {
         Scenario::ALL
