@@ -85,6 +85,13 @@ pub enum Effect<'a> {
         /// nadir view).
         view_azimuth_deg: f32,
     },
+    /// RTM models only: a constant reflectance added to each observed band (a bias of the band
+    /// model, the sensor or the atmospheric correction, fitted by the residual analysis).
+    BandOffset {
+        /// One offset per observed band (reflectance, f32).
+        #[serde(borrow)]
+        offset: LeF32<'a>,
+    },
 }
 
 impl Effect<'_> {
@@ -118,6 +125,7 @@ impl Effect<'_> {
             Effect::Step { .. } => "step",
             Effect::Drift { .. } => "drift",
             Effect::Illumination { .. } => "illumination",
+            Effect::BandOffset { .. } => "band_offset",
         }
     }
 
@@ -151,8 +159,8 @@ impl Effect<'_> {
             {
                 Ok(())
             }
-            Effect::Illumination { .. } => Err(Error::InvalidModel(
-                "the illumination effect belongs to RTM models, not to a GNSS network",
+            Effect::Illumination { .. } | Effect::BandOffset { .. } => Err(Error::InvalidModel(
+                "illumination and band offsets belong to RTM models, not to a GNSS network",
             )),
             _ => Err(Error::InvalidModel(
                 "effect parameters invalid or sized for another network",
@@ -277,19 +285,28 @@ impl Effect<'_> {
                     *o += R::c(r as f64) * years;
                 }
             }
-            Effect::Illumination { .. } => {
+            Effect::Illumination { .. } | Effect::BandOffset { .. } => {
                 return Err(Error::InvalidModel(
-                    "the illumination effect belongs to RTM models, not to a GNSS network",
+                    "illumination and band offsets belong to RTM models, not to a GNSS network",
                 ))
             }
         }
         Ok(())
     }
 
-    /// Checks an effect of an RTM model: only [`Effect::Illumination`], with a site on Earth and
-    /// an hour of the day.
-    pub fn validate_rtm(&self) -> Result<(), Error> {
+    /// Checks an effect of an RTM model with `n_bands` observed bands: [`Effect::Illumination`]
+    /// with a site on Earth and an hour of the day, or [`Effect::BandOffset`] with one finite
+    /// offset (|offset| < 1) per band.
+    pub fn validate_rtm(&self, n_bands: usize) -> Result<(), Error> {
         match *self {
+            Effect::BandOffset { offset }
+                if offset.0.len() == 4 * n_bands && offset.iter().all(|v| v.abs() < 1.0) =>
+            {
+                Ok(())
+            }
+            Effect::BandOffset { .. } => Err(Error::InvalidModel(
+                "band offsets: one per observed band, finite and below 1 in reflectance",
+            )),
             Effect::Illumination {
                 lat_deg,
                 lon_deg,
@@ -306,10 +323,30 @@ impl Effect<'_> {
                 "illumination: latitude, longitude, hour or view azimuth out of range",
             )),
             _ => Err(Error::InvalidModel(
-                "RTM models declare only the illumination effect",
+                "RTM models declare only the illumination and band-offset effects",
             )),
         }
     }
+}
+
+/// Adds the [`Effect::BandOffset`]s of `effects` to an RTM model's bands `out` (the others leave
+/// it unchanged).
+pub fn rtm_add_offsets<R: Real>(effects: &[Effect<'_>], out: &mut [R]) -> Result<(), Error> {
+    for e in effects {
+        if let Effect::BandOffset { offset } = *e {
+            if offset.0.len() != 4 * out.len() {
+                return Err(Error::SizeMismatch {
+                    what: "band offsets",
+                    expected: out.len(),
+                    found: offset.0.len() / 4,
+                });
+            }
+            for (o, v) in out.iter_mut().zip(offset.iter()) {
+                *o += R::c(v as f64);
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The fixed INFORM inputs of an observation made on day `t_day`: `fixed` with the sun zenith
@@ -586,8 +623,8 @@ mod tests {
         let mut out = [0.0f64; 6];
         assert!(sun.apply(&NET, &[], 14_000.0, &mut out).is_err());
         // An RTM term: the sun of the day, relative azimuth to the view.
-        assert!(sun.validate_rtm().is_ok());
-        assert!(Effect::CommonMode.validate_rtm().is_err());
+        assert!(sun.validate_rtm(11).is_ok());
+        assert!(Effect::CommonMode.validate_rtm(11).is_err());
         let day = crate::time::days_from_civil(2018, 7, 2) as f64;
         let f = rtm_fixed_at(&[sun], &crate::rtm::Fixed::default(), day).unwrap();
         let p = crate::sun::position(day, 10.0, 47.5, 14.5).unwrap();
@@ -609,6 +646,31 @@ mod tests {
             utc_hours: 10.0,
             view_azimuth_deg: 0.0,
         };
-        assert!(off.validate_rtm().is_err());
+        assert!(off.validate_rtm(11).is_err());
+    }
+
+    #[test]
+    fn band_offsets_add_to_rtm_bands() {
+        let mut bytes = [0u8; 8];
+        bytes[..4].copy_from_slice(&0.01f32.to_le_bytes());
+        bytes[4..].copy_from_slice(&(-0.02f32).to_le_bytes());
+        let e = Effect::BandOffset {
+            offset: LeF32(&bytes),
+        };
+        assert!(!e.needs_time() && e.n_latent() == 0 && e.family() == "band_offset");
+        assert!(e.validate_rtm(2).is_ok());
+        assert!(e.validate_rtm(3).is_err());
+        assert!(e.validate(2).is_err());
+        let mut out = [0.1f64, 0.2];
+        rtm_add_offsets(&[e], &mut out).unwrap();
+        assert!((out[0] - 0.11).abs() < 1e-8 && (out[1] - 0.18).abs() < 1e-8);
+        assert!(rtm_add_offsets(&[e], &mut [0.0f64; 3]).is_err());
+        let mut big = [0u8; 8];
+        big[..4].copy_from_slice(&2.0f32.to_le_bytes());
+        assert!(Effect::BandOffset {
+            offset: LeF32(&big)
+        }
+        .validate_rtm(2)
+        .is_err());
     }
 }

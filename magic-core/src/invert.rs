@@ -444,7 +444,8 @@ pub fn forward_for<R: Real, P: Problems>(
             model
                 .problem
                 .packed()?
-                .forward_learned(&z, &fixed, *geometry, out)
+                .forward_learned(&z, &fixed, *geometry, out)?;
+            crate::effects::rtm_add_offsets(&model.effects, out)
         }
     }
 }

@@ -479,7 +479,7 @@ impl<'a> Model<'a> {
                 }
                 let packed = self.problem.packed()?;
                 for e in &self.effects {
-                    e.validate_rtm()?;
+                    e.validate_rtm(n_obs)?;
                     if let (Effect::Illumination { .. }, Problem::Rtm { geometry, .. }) =
                         (e, &self.problem)
                     {

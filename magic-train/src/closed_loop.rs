@@ -65,6 +65,8 @@ pub struct CandidateSummary {
     pub significant: bool,
     /// Fitted parameters.
     pub params: serde_json::Value,
+    /// Whether it can be added to F as declared physics.
+    pub declarable: bool,
 }
 
 impl From<&Candidate> for CandidateSummary {
@@ -75,6 +77,7 @@ impl From<&Candidate> for CandidateSummary {
             chance_level: c.chance_level,
             significant: c.significant,
             params: c.params.clone(),
+            declarable: c.effect.is_some(),
         }
     }
 }

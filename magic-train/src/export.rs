@@ -102,6 +102,11 @@ pub enum OwnedEffect {
         /// Sensor view azimuth (degrees).
         view_azimuth_deg: f32,
     },
+    /// RTM: a constant reflectance per observed band.
+    BandOffset {
+        /// Offsets (reflectance), one per observed band.
+        offset: Vec<f32>,
+    },
 }
 
 impl OwnedEffect {
@@ -110,6 +115,7 @@ impl OwnedEffect {
         match self {
             OwnedEffect::Seasonal { coef } => f32_bytes(coef),
             OwnedEffect::Drift { rate, .. } => f32_bytes(rate),
+            OwnedEffect::BandOffset { offset } => f32_bytes(offset),
             _ => vec![],
         }
     }
@@ -152,6 +158,9 @@ impl OwnedEffect {
                 lon_deg,
                 utc_hours,
                 view_azimuth_deg,
+            },
+            OwnedEffect::BandOffset { .. } => Effect::BandOffset {
+                offset: LeF32(bytes),
             },
         }
     }
@@ -196,6 +205,9 @@ impl OwnedEffect {
                 lon_deg,
                 utc_hours,
                 view_azimuth_deg,
+            },
+            Effect::BandOffset { offset } => OwnedEffect::BandOffset {
+                offset: offset.iter().collect(),
             },
         }
     }

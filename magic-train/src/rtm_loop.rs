@@ -4,9 +4,10 @@
 //! (`physical` geometry: the sun zenith, view zenith and relative azimuth enter as the equations
 //! say) and the paper's fixed sun at 30°. Each round analyses B's residuals
 //! ([`crate::rtm_residuals`]: illumination, per-band and per-species structure, each scored on
-//! held-out spectra against surrogates), adds the top significant family that can be declared as
-//! physics, retrains, and repeats (at most `max_rounds`). Families found but not declarable (a
-//! per-species structure: the species is not an input of the inversion) are reported.
+//! held-out spectra against surrogates), adds the top significant family that can be declared in
+//! F (illumination, band offsets), retrains, and repeats (at most `max_rounds`). Families found but
+//! not declarable (a per-species structure: the species is not an input of the inversion) are
+//! reported.
 //!
 //! The illumination effect is also tested directly when the loop did not add it: B and C are
 //! retrained with each spectrum's own sun, and the report says whether the physics-only error
@@ -327,11 +328,7 @@ fn write_report(setup: &RtmSetup, l: &RtmLoop, dir: &Path) -> Result<()> {
                 c.variance_explained,
                 c.chance_level,
                 if c.significant { "yes" } else { "no" },
-                if c.family == "illumination" {
-                    "yes"
-                } else {
-                    "no"
-                }
+                if c.declarable { "yes" } else { "no" }
             );
         }
         if !r.stop.is_empty() {
@@ -339,12 +336,12 @@ fn write_report(setup: &RtmSetup, l: &RtmLoop, dir: &Path) -> Result<()> {
         }
         let _ = writeln!(md);
     }
-    if let (Some([b1, c1]), Some(r0)) = (&l.illumination_test, l.rounds.first()) {
+    if let (Some([b1, c1]), Some(r0)) = (&l.illumination_test, l.rounds.last()) {
         let _ = writeln!(md, "## Illumination, tested directly\n");
         let rel = |a: f64, b: f64| 100.0 * (b - a) / a;
         let _ = writeln!(
             md,
-            "With each spectrum's own sun: B test MSE (= its physics-only error) {} → {} ({:+.1} %); C physics-only test {} → {}; C's correction {} → {} ({:+.1} %).",
+            "With each spectrum's own sun added to the last round's F: B test MSE (= its physics-only error) {} → {} ({:+.1} %); C physics-only test {} → {}; C's correction {} → {} ({:+.1} %).",
             f4(r0.b.mse[2]),
             f4(b1.mse[2]),
             rel(r0.b.mse[2], b1.mse[2]),

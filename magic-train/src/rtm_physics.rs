@@ -24,8 +24,10 @@ pub struct RtmPhysics {
     pub fixed: Fixed,
     /// Geometry mode.
     pub geometry: Geometry,
-    /// Declared effects (illumination).
+    /// Declared effects (illumination, band offsets).
     pub effects: Vec<OwnedEffect>,
+    /// The band offsets of the effects, summed (reflectance; empty without).
+    offsets: Vec<f64>,
     /// Jacobians of the op's forward pass kept for its backward pass.
     reuse: JacobianReuse,
 }
@@ -52,21 +54,32 @@ impl RtmPhysics {
             fixed,
             geometry,
             effects: vec![],
+            offsets: vec![],
             reuse: JacobianReuse::default(),
         })
     }
 
     /// The same model with declared effects (checked as an RTM model checks them).
     pub fn with_effects(mut self, effects: Vec<OwnedEffect>) -> Result<Self, Error> {
+        let n = self.n_obs();
+        let mut offsets = vec![];
         for e in &effects {
-            e.borrow(&[]).validate_rtm()?;
+            let bytes = e.bytes();
+            e.borrow(&bytes).validate_rtm(n)?;
             if e.family() == "illumination" && self.geometry == Geometry::Reference {
                 return Err(Error::InvalidModel(
                     magic_core::model_file::ILLUMINATION_NEEDS_PHYSICAL,
                 ));
             }
+            if let OwnedEffect::BandOffset { offset } = e {
+                offsets.resize(n, 0.0);
+                for (o, v) in offsets.iter_mut().zip(offset) {
+                    *o += *v as f64;
+                }
+            }
         }
         self.effects = effects;
+        self.offsets = offsets;
         Ok(self)
     }
 
@@ -90,7 +103,9 @@ impl Physics for RtmPhysics {
     fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), Error> {
         self.rows
             .model()?
-            .forward_learned(&learned(p)?, &self.fixed_at(t)?, self.geometry, out)
+            .forward_learned(&learned(p)?, &self.fixed_at(t)?, self.geometry, out)?;
+        out.iter_mut().zip(&self.offsets).for_each(|(o, v)| *o += v);
+        Ok(())
     }
     fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), Error> {
         let n = self.n_obs();

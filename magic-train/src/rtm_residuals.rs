@@ -18,8 +18,9 @@
 //!   `magic_core::effects::Effect::Illumination`. When the model already declares it the pattern
 //!   is zero and the family scores 0.
 //! * `band_offset`: one constant per band (a bias of the band model, the sensor or the atmospheric
-//!   correction), fitted in the projected space. Not a physical effect with its own variables:
-//!   reported, not added.
+//!   correction), fitted in the projected space: `(Σ Pᵢ)⁻¹ Σ Pᵢ rᵢ`, the offset that added to F
+//!   removes most of what its variables cannot fit. Declarable as
+//!   `magic_core::effects::Effect::BandOffset` (fitted constants, in reflectance).
 //! * `species`: one constant per band and species (structure the forest model does not have per
 //!   species: leaf angles, crown shape, understory). Reported, not added (the species is not an
 //!   input of the inversion).
@@ -36,6 +37,7 @@
 //! [`crate::residuals`] ([`Candidate::from_scores`]).
 
 use crate::data::s2::{S2Data, S2Split};
+use crate::export::OwnedEffect;
 use crate::residuals::{effects_chart, Candidate};
 use crate::rtm_pipeline::s2_illumination;
 use anyhow::{anyhow, bail, Result};
@@ -560,13 +562,28 @@ pub fn analyse_rtm(
                 .collect()
         })
         .unwrap_or_default();
+    let offset_declared = model
+        .effects
+        .iter()
+        .any(|e| matches!(e, magic_core::effects::Effect::BandOffset { .. }));
+    let offset_effect = groups
+        .first()
+        .and_then(|g| g.as_ref())
+        .filter(|_| !offset_declared)
+        .map(|b| OwnedEffect::BandOffset {
+            offset: b
+                .iter()
+                .enumerate()
+                .map(|(c, v)| (v * obs_scale[c] as f64) as f32)
+                .collect(),
+        });
     effects.push(Candidate::from_scores(
         "band_offset",
         band,
         band_chance,
         opts.quantile,
-        json!({ "offset_reflectance": offsets_refl }),
-        None,
+        json!({ "offset_reflectance": offsets_refl, "declared": offset_declared }),
+        offset_effect,
     ));
 
     // Species.

@@ -234,7 +234,7 @@ fn corrupt_and_inconsistent_rtm_files_are_errors() {
     // GNSS effects are not RTM effects; illumination needs the physical geometry (this model is
     // in the reference geometry).
     let e = with(&|o| o.effects.push(magic_train::export::OwnedEffect::CommonMode));
-    assert!(e.contains("only the illumination effect"), "{e}");
+    assert!(e.contains("only the illumination and band-offset effects"), "{e}");
     let e = with(&|o| o.effects.push(magic_train::rtm_pipeline::s2_illumination()));
     assert!(e.contains("physical geometry"), "{e}");
 }
@@ -486,8 +486,9 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
     assert!(ill.effect.is_none() && ill.variance_explained == 0.0);
 }
 
-/// An RTM model with the illumination effect (physical geometry) reads a date on each line on
-/// the board, and the board's sun (computed there from the date) gives the host's results.
+/// An RTM model with the illumination effect (physical geometry) and band offsets reads a date on
+/// each line on the board, and the board's sun (computed there from the date) gives the host's
+/// results.
 #[test]
 fn rtm_illumination_model_runs_on_the_firmware() {
     let Some((model, _)) = trained_b() else {
@@ -501,10 +502,25 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     if let Problem::Rtm { geometry, .. } = &mut m.problem {
         *geometry = Geometry::Physical;
     }
-    m.effects = vec![magic_train::rtm_pipeline::s2_illumination()];
+    m.effects = vec![
+        magic_train::rtm_pipeline::s2_illumination(),
+        magic_train::export::OwnedEffect::BandOffset {
+            offset: (0..11).map(|b| 0.002 * b as f32 - 0.01).collect(),
+        },
+    ];
     let bytes = m.encode().unwrap();
     let decoded = Model::decode(&bytes).unwrap();
     assert!(decoded.needs_time());
+    // The offsets add to INFORM's bands.
+    let z = [1.5, 40.0, 0.01, 0.01, 3.0, 0.5, 0.6];
+    let (mut with, mut without) = ([0.0; 11], [0.0; 11]);
+    magic_core::invert::forward::<f64>(&decoded, &z, 17_700.0, &mut with).unwrap();
+    let mut plain = decoded.clone();
+    plain.effects.truncate(1);
+    magic_core::invert::forward::<f64>(&plain, &z, 17_700.0, &mut without).unwrap();
+    for (b, (w, o)) in with.iter().zip(&without).enumerate() {
+        assert!((w - o - (0.002 * b as f64 - 0.01)).abs() < 1e-7, "band {b}");
+    }
     let s = setup().unwrap();
     let dir = std::env::temp_dir().join(format!("magic-rtm-ill-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
