@@ -5,7 +5,8 @@
 //! say) and the paper's fixed sun at 30°. Each round analyses B's residuals
 //! ([`crate::rtm_residuals`]: illumination, per-band and per-species structure, each scored on
 //! held-out spectra against surrogates), adds the top significant family that can be declared in
-//! F (illumination, band offsets), retrains, and repeats (at most `max_rounds`). Families found but
+//! F (illumination, band offsets), retrains, and repeats (at most `max_rounds`); an added effect
+//! that does not lower B's validation MSE is taken out again and the loop stops. Families found but
 //! not declarable (a per-species structure: the species is not an input of the inversion) are
 //! reported.
 //!
@@ -202,6 +203,17 @@ pub fn run(setup: &mut RtmSetup, opts: &RtmLoopOptions, dir: &Path) -> Result<Rt
             stop: String::new(),
         });
         let last = rounds.len() - 1;
+        // An effect that does not lower B's validation error is taken out again: significance in
+        // the residuals is necessary, not sufficient.
+        if last > 0 && rounds[last].b.mse[1] >= rounds[last - 1].b.mse[1] {
+            let removed = setup.effects.pop().map(|e| e.family()).unwrap_or("?");
+            rounds[last].stop = format!(
+                "{removed} did not lower B's validation MSE ({:.4} → {:.4}) and was taken out of F again",
+                rounds[last - 1].b.mse[1],
+                rounds[last].b.mse[1]
+            );
+            break;
+        }
         if round == opts.max_rounds {
             rounds[last].stop = format!("the round limit ({}) was reached", opts.max_rounds);
             break;
@@ -336,12 +348,19 @@ fn write_report(setup: &RtmSetup, l: &RtmLoop, dir: &Path) -> Result<()> {
         }
         let _ = writeln!(md);
     }
-    if let (Some([b1, c1]), Some(r0)) = (&l.illumination_test, l.rounds.last()) {
+    // The illumination test adds the sun to the last F that was kept.
+    let kept = l
+        .rounds
+        .iter()
+        .rev()
+        .find(|r| !r.stop.contains("taken out of F"));
+    if let (Some([b1, c1]), Some(r0)) = (&l.illumination_test, kept) {
         let _ = writeln!(md, "## Illumination, tested directly\n");
         let rel = |a: f64, b: f64| 100.0 * (b - a) / a;
         let _ = writeln!(
             md,
-            "With each spectrum's own sun added to the last round's F: B test MSE (= its physics-only error) {} → {} ({:+.1} %); C physics-only test {} → {}; C's correction {} → {} ({:+.1} %).",
+            "With each spectrum's own sun added to the last F kept (round {}): B test MSE (= its physics-only error) {} → {} ({:+.1} %); C physics-only test {} → {}; C's correction {} → {} ({:+.1} %).",
+            r0.round,
             f4(r0.b.mse[2]),
             f4(b1.mse[2]),
             rel(r0.b.mse[2], b1.mse[2]),

@@ -18,9 +18,9 @@
 //!   `magic_core::effects::Effect::Illumination`. When the model already declares it the pattern
 //!   is zero and the family scores 0.
 //! * `band_offset`: one constant per band (a bias of the band model, the sensor or the atmospheric
-//!   correction), fitted in the projected space: `(Σ Pᵢ)⁻¹ Σ Pᵢ rᵢ`, the offset that added to F
-//!   removes most of what its variables cannot fit. Declarable as
-//!   `magic_core::effects::Effect::BandOffset` (fitted constants, in reflectance).
+//!   correction), scored in the projected space (`(Σ Pᵢ)⁻¹ Σ Pᵢ rᵢ`). Declarable as
+//!   `magic_core::effects::Effect::BandOffset` with the mean residual per band of the fitting
+//!   spectra (reflectance).
 //! * `species`: one constant per band and species (structure the forest model does not have per
 //!   species: leaf angles, crown shape, understory). Reported, not added (the species is not an
 //!   input of the inversion).
@@ -100,6 +100,8 @@ struct Spectrum {
     g: Vec<Vec<f64>>,
     /// Squared norm of the unprojected residual.
     raw2: f64,
+    /// The unprojected residual (standardised).
+    raw: Vec<f64>,
 }
 
 impl Spectrum {
@@ -400,6 +402,7 @@ fn spectra(
                 species: *species_of.get(&split.class[i]).unwrap_or(&0),
                 g: vec![],
                 raw2: raw.iter().map(|v| v * v).sum(),
+                raw: raw.clone(),
             };
             s.r = s.project(&raw);
             // The model's own F at its sun (y, from the Jacobian call) against each date's sun.
@@ -566,17 +569,17 @@ pub fn analyse_rtm(
         .effects
         .iter()
         .any(|e| matches!(e, magic_core::effects::Effect::BandOffset { .. }));
-    let offset_effect = groups
-        .first()
-        .and_then(|g| g.as_ref())
-        .filter(|_| !offset_declared)
-        .map(|b| OwnedEffect::BandOffset {
-            offset: b
-                .iter()
-                .enumerate()
-                .map(|(c, v)| (v * obs_scale[c] as f64) as f32)
-                .collect(),
-        });
+    // The declared offset: the mean residual per band over the fitting spectra, in reflectance
+    // (the projected fit above scores the family; its offset has components along F's Jacobian
+    // that the encoder would have to undo).
+    let offset_effect = (!offset_declared && !fit.is_empty()).then(|| OwnedEffect::BandOffset {
+        offset: (0..nb)
+            .map(|c| {
+                let m = fit.iter().map(|s| s.raw[c]).sum::<f64>() / fit.len() as f64;
+                (m * obs_scale[c] as f64) as f32
+            })
+            .collect(),
+    });
     effects.push(Candidate::from_scores(
         "band_offset",
         band,
