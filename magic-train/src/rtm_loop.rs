@@ -317,12 +317,19 @@ fn write_report(setup: &RtmSetup, l: &RtmLoop, dir: &Path) -> Result<()> {
         });
         let _ = writeln!(md, "| {} |{}", r.round, &row(&f, &added, &r.b, &r.c)[1..]);
     }
+    // The illumination test adds the sun to the last F that was kept.
+    let kept = l
+        .rounds
+        .iter()
+        .rev()
+        .find(|r| !r.stop.contains("taken out of F"));
     if let Some([b, c]) = &l.illumination_test {
-        let _ = writeln!(
-            md,
-            "| test |{}",
-            &row("INFORM + illumination", "(direct test)", b, c)[1..]
-        );
+        let f = std::iter::once("INFORM".to_string())
+            .chain(kept.iter().flat_map(|r| r.effects.iter().cloned()))
+            .chain(["illumination".to_string()])
+            .collect::<Vec<_>>()
+            .join(" + ");
+        let _ = writeln!(md, "| test |{}", &row(&f, "(direct test)", b, c)[1..]);
     }
     let _ = writeln!(md);
     for r in &l.rounds {
@@ -348,12 +355,6 @@ fn write_report(setup: &RtmSetup, l: &RtmLoop, dir: &Path) -> Result<()> {
         }
         let _ = writeln!(md);
     }
-    // The illumination test adds the sun to the last F that was kept.
-    let kept = l
-        .rounds
-        .iter()
-        .rev()
-        .find(|r| !r.stop.contains("taken out of F"));
     if let (Some([b1, c1]), Some(r0)) = (&l.illumination_test, kept) {
         let _ = writeln!(md, "## Illumination, tested directly\n");
         let rel = |a: f64, b: f64| 100.0 * (b - a) / a;
