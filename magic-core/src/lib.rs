@@ -13,7 +13,7 @@
 //! * [`quant`] and [`nn`] — int8 / f32 dense layers and the MLPs built from them;
 //! * [`model_file`] — the exported model, decoded without allocation;
 //! * [`sun`] — the sun's zenith and azimuth from date, time and place (illumination geometry);
-//! * [`invert`] — observations to variables, reconstruction, residual and quality flags.
+//! * [`invert`](mod@invert) — observations to variables, reconstruction, residual and quality flags.
 //! * [`lsq`] — the classical baseline: per-day Levenberg–Marquardt fits with the exact Jacobian.
 #![no_std]
 #![deny(missing_docs)]

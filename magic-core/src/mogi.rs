@@ -229,7 +229,7 @@ pub fn field_of<R: Real, N: Network + ?Sized>(
     Ok(())
 }
 
-/// Field and exact Jacobian: `jac[c][j]` = ∂ out[c] / ∂ p[j]. `out` and `jac` hold 3 × stations
+/// Field and exact Jacobian: `jac[c][j]` = ∂`out[c]` / ∂`p[j]`. `out` and `jac` hold 3 × stations
 /// rows.
 pub fn field_jacobian(
     stations: &[Station],
