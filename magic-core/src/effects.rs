@@ -294,11 +294,19 @@ impl Effect<'_> {
         Ok(())
     }
 
-    /// Checks an effect of an RTM model with `n_bands` observed bands: [`Effect::Illumination`]
-    /// with a site on Earth and an hour of the day, or [`Effect::BandOffset`] with one finite
-    /// offset (|offset| < 1) per band.
-    pub fn validate_rtm(&self, n_bands: usize) -> Result<(), Error> {
+    /// Checks an effect of an RTM model with `n_bands` observed bands in `geometry`:
+    /// [`Effect::Illumination`] with a site on Earth and an hour of the day (physical geometry
+    /// only: the reference geometry hands INFORM cosines where angles are expected), or
+    /// [`Effect::BandOffset`] with one finite offset (|offset| < 1) per band.
+    pub fn validate_rtm(
+        &self,
+        n_bands: usize,
+        geometry: crate::rtm::Geometry,
+    ) -> Result<(), Error> {
         match *self {
+            Effect::Illumination { .. } if geometry == crate::rtm::Geometry::Reference => {
+                Err(Error::InvalidModel(ILLUMINATION_NEEDS_PHYSICAL))
+            }
             Effect::BandOffset { offset }
                 if offset.0.len() == 4 * n_bands && offset.iter().all(|v| v.abs() < 1.0) =>
             {
@@ -328,6 +336,9 @@ impl Effect<'_> {
         }
     }
 }
+
+/// Why an RTM model in the reference geometry cannot declare the illumination effect.
+pub const ILLUMINATION_NEEDS_PHYSICAL: &str = "the illumination effect needs the physical geometry (the reference geometry hands INFORM cosines where angles are expected)";
 
 /// Adds the [`Effect::BandOffset`]s of `effects` to an RTM model's bands `out` (the others leave
 /// it unchanged).
@@ -623,8 +634,10 @@ mod tests {
         let mut out = [0.0f64; 6];
         assert!(sun.apply(&NET, &[], 14_000.0, &mut out).is_err());
         // An RTM term: the sun of the day, relative azimuth to the view.
-        assert!(sun.validate_rtm(11).is_ok());
-        assert!(Effect::CommonMode.validate_rtm(11).is_err());
+        assert!(sun.validate_rtm(11, crate::rtm::Geometry::Physical).is_ok());
+        assert!(Effect::CommonMode
+            .validate_rtm(11, crate::rtm::Geometry::Physical)
+            .is_err());
         let day = crate::time::days_from_civil(2018, 7, 2) as f64;
         let f = rtm_fixed_at(&[sun], &crate::rtm::Fixed::default(), day).unwrap();
         let p = crate::sun::position(day, 10.0, 47.5, 14.5).unwrap();
@@ -646,7 +659,9 @@ mod tests {
             utc_hours: 10.0,
             view_azimuth_deg: 0.0,
         };
-        assert!(off.validate_rtm(11).is_err());
+        assert!(off
+            .validate_rtm(11, crate::rtm::Geometry::Physical)
+            .is_err());
     }
 
     #[test]
@@ -658,8 +673,8 @@ mod tests {
             offset: LeF32(&bytes),
         };
         assert!(!e.needs_time() && e.n_latent() == 0 && e.family() == "band_offset");
-        assert!(e.validate_rtm(2).is_ok());
-        assert!(e.validate_rtm(3).is_err());
+        assert!(e.validate_rtm(2, crate::rtm::Geometry::Physical).is_ok());
+        assert!(e.validate_rtm(3, crate::rtm::Geometry::Physical).is_err());
         assert!(e.validate(2).is_err());
         let mut out = [0.1f64, 0.2];
         rtm_add_offsets(&[e], &mut out).unwrap();
@@ -670,7 +685,7 @@ mod tests {
         assert!(Effect::BandOffset {
             offset: LeF32(&big)
         }
-        .validate_rtm(2)
+        .validate_rtm(2, crate::rtm::Geometry::Physical)
         .is_err());
     }
 }

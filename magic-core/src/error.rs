@@ -65,6 +65,19 @@ pub enum Error {
     },
 }
 
+/// `Ok` when a length is the one required, else [`Error::SizeMismatch`].
+pub(crate) fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Error> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(Error::SizeMismatch {
+            what,
+            expected,
+            found,
+        })
+    }
+}
+
 /// Where [`Error::describe`] writes a message: text pieces and numbers, so that a target
 /// without `core::fmt` (the firmware keeps its flash small) prints the same words as `Display`.
 pub trait MessageSink {

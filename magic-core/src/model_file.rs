@@ -228,8 +228,7 @@ impl<'a> Problem<'a> {
     }
 }
 
-/// Why an RTM model in the reference geometry cannot declare the illumination effect.
-pub const ILLUMINATION_NEEDS_PHYSICAL: &str = "the illumination effect needs the physical geometry (the reference geometry hands INFORM cosines where angles are expected)";
+pub use crate::effects::ILLUMINATION_NEEDS_PHYSICAL;
 
 /// A decoded model. Weight arrays borrow from the bytes it was decoded from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -466,7 +465,12 @@ impl<'a> Model<'a> {
                 mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
             }
             Problem::Rtm { .. } if !P::RTM => return Err(Error::WrongProblem),
-            Problem::Rtm { bands, fixed, .. } => {
+            Problem::Rtm {
+                bands,
+                fixed,
+                geometry,
+                ..
+            } => {
                 if *bands >> N_BANDS != 0 {
                     return Err(Error::InvalidModel("RTM band mask names bands beyond B12"));
                 }
@@ -479,14 +483,7 @@ impl<'a> Model<'a> {
                 }
                 let packed = self.problem.packed()?;
                 for e in &self.effects {
-                    e.validate_rtm(n_obs)?;
-                    if let (Effect::Illumination { .. }, Problem::Rtm { geometry, .. }) =
-                        (e, &self.problem)
-                    {
-                        if *geometry == Geometry::Reference {
-                            return Err(Error::InvalidModel(ILLUMINATION_NEEDS_PHYSICAL));
-                        }
-                    }
+                    e.validate_rtm(n_obs, *geometry)?;
                 }
                 let f = fixed;
                 let all = [

@@ -71,6 +71,8 @@ pub struct RtmRound {
     pub candidates: Vec<CandidateSummary>,
     /// Why the loop stopped after this round (empty if it went on).
     pub stop: String,
+    /// Whether this round's F was kept (false when its added effect was taken out again).
+    pub kept: bool,
 }
 
 /// The loop's result.
@@ -201,12 +203,14 @@ pub fn run(setup: &mut RtmSetup, opts: &RtmLoopOptions, dir: &Path) -> Result<Rt
             c,
             candidates,
             stop: String::new(),
+            kept: true,
         });
         let last = rounds.len() - 1;
         // An effect that does not lower B's validation error is taken out again: significance in
         // the residuals is necessary, not sufficient.
         if last > 0 && rounds[last].b.mse[1] >= rounds[last - 1].b.mse[1] {
             let removed = setup.effects.pop().map(|e| e.family()).unwrap_or("?");
+            rounds[last].kept = false;
             rounds[last].stop = format!(
                 "{removed} did not lower B's validation MSE ({:.4} → {:.4}) and was taken out of F again",
                 rounds[last - 1].b.mse[1],
@@ -218,12 +222,8 @@ pub fn run(setup: &mut RtmSetup, opts: &RtmLoopOptions, dir: &Path) -> Result<Rt
             rounds[last].stop = format!("the round limit ({}) was reached", opts.max_rounds);
             break;
         }
-        let have: Vec<&str> = setup.effects.iter().map(|e| e.family()).collect();
-        let next = analysis
-            .effects
-            .iter()
-            .find(|c| c.significant && c.effect.is_some() && !have.contains(&c.family.as_str()));
-        match next {
+        // (A family already in F has no effect to propose.)
+        match analysis.top_declarable() {
             Some(cand) => {
                 setup.effects.push(
                     cand.effect
@@ -318,11 +318,7 @@ fn write_report(setup: &RtmSetup, l: &RtmLoop, dir: &Path) -> Result<()> {
         let _ = writeln!(md, "| {} |{}", r.round, &row(&f, &added, &r.b, &r.c)[1..]);
     }
     // The illumination test adds the sun to the last F that was kept.
-    let kept = l
-        .rounds
-        .iter()
-        .rev()
-        .find(|r| !r.stop.contains("taken out of F"));
+    let kept = l.rounds.iter().rev().find(|r| r.kept);
     if let Some([b, c]) = &l.illumination_test {
         let f = std::iter::once("INFORM".to_string())
             .chain(kept.iter().flat_map(|r| r.effects.iter().cloned()))

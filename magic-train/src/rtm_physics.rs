@@ -65,12 +65,7 @@ impl RtmPhysics {
         let mut offsets = vec![];
         for e in &effects {
             let bytes = e.bytes();
-            e.borrow(&bytes).validate_rtm(n)?;
-            if e.family() == "illumination" && self.geometry == Geometry::Reference {
-                return Err(Error::InvalidModel(
-                    magic_core::model_file::ILLUMINATION_NEEDS_PHYSICAL,
-                ));
-            }
+            e.borrow(&bytes).validate_rtm(n, self.geometry)?;
             if let OwnedEffect::BandOffset { offset } = e {
                 offsets.resize(n, 0.0);
                 for (o, v) in offsets.iter_mut().zip(offset) {
@@ -85,11 +80,10 @@ impl RtmPhysics {
 
     /// The fixed inputs of an observation on day `t` (the paper's fixed sun without effects).
     pub fn fixed_at(&self, t: f64) -> Result<Fixed, Error> {
-        if self.effects.is_empty() {
-            return Ok(self.fixed);
-        }
-        let core: Vec<_> = self.effects.iter().map(|e| e.borrow(&[])).collect();
-        magic_core::effects::rtm_fixed_at(&core, &self.fixed, t)
+        // One effect at a time: no allocation on the training path (the sun reads no bytes).
+        self.effects.iter().try_fold(self.fixed, |f, e| {
+            magic_core::effects::rtm_fixed_at(&[e.borrow(&[])], &f, t)
+        })
     }
 }
 

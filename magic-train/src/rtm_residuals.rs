@@ -142,12 +142,8 @@ pub struct RtmAnalysis {
 }
 
 impl RtmAnalysis {
-    /// The top candidate if it is significant.
-    pub fn top_significant(&self) -> Option<&Candidate> {
-        self.effects.first().filter(|c| c.significant)
-    }
-
-    /// The most significant candidate that can be declared as physics (has an effect).
+    /// The most significant candidate that can be declared as physics (has an effect; a family
+    /// the model already declares has none).
     pub fn top_declarable(&self) -> Option<&Candidate> {
         self.effects
             .iter()

@@ -241,14 +241,7 @@ impl<V: Values> Packed<V> {
     }
 
     fn check_out<T>(&self, out: &[T]) -> Result<(), Error> {
-        if out.len() != self.n_bands {
-            return Err(Error::SizeMismatch {
-                what: "band output",
-                expected: self.n_bands,
-                found: out.len(),
-            });
-        }
-        Ok(())
+        crate::error::check_len("band output", self.n_bands, out.len())
     }
 
     /// The observed bands for the 21 inputs (`out.len()` = number of bands). Errors as

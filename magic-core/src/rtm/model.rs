@@ -158,14 +158,7 @@ pub fn inputs_from_learned<R: Real>(z: &[R; N_LEARNED], f: &Fixed) -> [R; N_INPU
 }
 
 fn check_len(what: &'static str, s: &[f64], n: usize) -> Result<(), Error> {
-    if s.len() != n {
-        return Err(Error::SizeMismatch {
-            what,
-            expected: n,
-            found: s.len(),
-        });
-    }
-    Ok(())
+    crate::error::check_len(what, n, s.len())
 }
 
 impl<'a> Inform<'a> {

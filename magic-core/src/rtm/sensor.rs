@@ -115,14 +115,7 @@ impl<'a> Resampling<'a> {
     }
 
     fn check_out<R>(&self, out: &[R]) -> Result<(), Error> {
-        if out.len() != self.n_bands {
-            return Err(Error::SizeMismatch {
-                what: "band output",
-                expected: self.n_bands,
-                found: out.len(),
-            });
-        }
-        Ok(())
+        crate::error::check_len("band output", self.n_bands, out.len())
     }
 
     /// The wavelength indices where some band has weight, in ascending order.
