@@ -1,30 +1,28 @@
-//! `magic loop`: close the loop between residuals and physics.
+//! `magic loop`: close the loop between residuals and physics, for every problem.
 //!
-//! Round 0 trains B (encoder + F) and C (+ correction) with the plain Mogi model. Each round then
-//! analyses B's residuals against candidate effects (scored on held-out data and against chance,
-//! [`crate::residuals`]), adds the top significant effect to F as declared physics, and retrains —
-//! at most three rounds, and only while an effect is significant. Every round is scored the same
-//! way: train/valid/test MSE of B and C, B's physics-only error, the per-day classical fit
-//! (Levenberg–Marquardt with the latent effects declared so far), and the plausibility of the
-//! source on the test split. The report is Markdown + JSON + PNG plots.
+//! Round 0 trains B (encoder + F) and C (+ correction) with the problem's plain F. Each round
+//! then analyses B's residuals ([`crate::analysis`]: every family scored on held-out data against
+//! chance), adds the top significant family that can be declared in F and is not yet, retrains,
+//! and repeats. One rule keeps an effect: it must lower B's validation MSE — significance in the
+//! residuals is necessary, not sufficient; an effect that does not is taken out again and the
+//! loop stops. The loop ends with a [`StopReason`] the report prints. Effects the problem names
+//! for a direct test ([`Problem::direct_tests`]) and that the loop did not add are then tried on
+//! top of the last F kept. Every round is scored the same way: train/valid/test MSE of B and C,
+//! physics-only errors, the size of C's correction, the problem's metrics and, where the problem
+//! has one, a classical baseline with the same declared effects.
 
-use crate::classical::fit_split;
-use crate::data::gnss::GnssData;
-use crate::demo::{plausibility, split_rows};
-use crate::eval::evaluate;
-use crate::export::{OwnedEffect, OwnedModel};
-use crate::pipeline::train_mogi_with;
-use crate::plots;
-use crate::residuals::{analyse, AnalysisOptions, Candidate};
-use crate::train::TrainConfig;
-use anyhow::{anyhow, Context, Result};
-use magic_core::{invert_at, Model, Variant, Workspace};
+use crate::analysis::{analyse, AnalysisOptions, Candidate};
+use crate::eval::evaluate_splits;
+use crate::model::OwnedEffect;
+use crate::problem::{Metric, Problem};
+use crate::report;
+use crate::train::{train_model, ModelKind, TrainConfig};
+use anyhow::{Context, Result};
+use magic_core::Model;
 use serde::Serialize;
-use serde_json::json;
-use std::fmt::Write as _;
 use std::path::Path;
 
-/// Options of the loop.
+/// Options of the loop, checked once by [`run`].
 #[derive(Clone, Debug)]
 pub struct LoopOptions {
     /// Training seed.
@@ -33,333 +31,293 @@ pub struct LoopOptions {
     pub train: TrainConfig,
     /// Most effects added.
     pub max_rounds: usize,
-    /// Also run the classical per-day fit each round.
-    pub classical: bool,
+    /// Also run the problem's classical baseline each round.
+    pub baseline: bool,
+    /// The residual analysis.
+    pub analysis: AnalysisOptions,
 }
 
-/// MSE of one model on the three splits.
+/// The scores of one model.
 #[derive(Clone, Debug, Serialize)]
 pub struct Scores {
     /// Train, valid, test MSE (standardised units).
     pub mse: [f64; 3],
-    /// Physics-only test MSE.
-    pub physics_test: Option<f64>,
-    /// Share of test days with depth < 10 km and |ΔV| < 5·10⁶ m³.
-    pub plausible_share: f64,
-    /// Largest ΔV on the test split (10⁶ m³) and the depth then (km).
-    pub peak_dv: f64,
-    /// Depth at the peak.
-    pub peak_depth: f64,
-}
-
-/// A candidate effect as reported.
-#[derive(Clone, Debug, Serialize)]
-pub struct CandidateSummary {
-    /// Family.
-    pub family: String,
-    /// Share of residual variance explained on held-out data.
-    pub variance_explained: f64,
-    /// Share explained by chance.
-    pub chance_level: f64,
-    /// Significant.
-    pub significant: bool,
-    /// Fitted parameters.
-    pub params: serde_json::Value,
-    /// Whether it can be added to F as declared physics.
-    pub declarable: bool,
-}
-
-impl From<&Candidate> for CandidateSummary {
-    fn from(c: &Candidate) -> Self {
-        CandidateSummary {
-            family: c.family.clone(),
-            variance_explained: c.variance_explained,
-            chance_level: c.chance_level,
-            significant: c.significant,
-            params: c.params.clone(),
-            declarable: c.effect.is_some(),
-        }
-    }
+    /// Physics-only MSE (F(E(x))) on train, valid, test.
+    pub physics: [f64; 3],
+    /// Mean squared correction C(F(E(x))) − F(E(x)) on the test split (0 for B).
+    pub correction_ms: f64,
+    /// The problem's metrics.
+    pub metrics: Vec<Metric>,
 }
 
 /// One round of the loop.
 #[derive(Clone, Debug, Serialize)]
 pub struct Round {
-    /// 0 for the plain model.
+    /// 0 for the plain F.
     pub round: usize,
-    /// Effects declared in F this round.
+    /// Families declared in F this round.
     pub effects: Vec<String>,
     /// The effect added for this round and why (none in round 0).
-    pub added: Option<CandidateSummary>,
+    pub added: Option<Candidate>,
     /// Encoder + F.
     pub b: Scores,
     /// Encoder + F + correction.
     pub c: Scores,
-    /// Classical per-day fit with the same declared effects: test MSE, if run.
-    pub classical_test_mse: Option<f64>,
-    /// Classical fit's plausible share and 2008 peak.
-    pub classical: Option<serde_json::Value>,
+    /// The classical baseline with the same declared effects, if run.
+    pub baseline: Vec<Metric>,
     /// The residual analysis of this round's B model, ranked.
-    pub candidates: Vec<CandidateSummary>,
-    /// Why the loop stopped after this round (empty when it went on).
-    pub stop: String,
+    pub candidates: Vec<Candidate>,
+    /// Whether this round's F was kept (false when its added effect was taken out again).
+    pub kept: bool,
 }
 
-fn scores(model: &OwnedModel, data: &GnssData) -> Result<(Scores, Vec<u8>)> {
-    let bytes = model.encode()?;
-    let (r, (peak_dv, peak_depth, share)) = {
-        let m = Model::decode(&bytes).map_err(|e| anyhow!("{e}"))?;
-        let r = [
-            evaluate(&m, &data.train, "train")?,
-            evaluate(&m, &data.valid, "valid")?,
-            evaluate(&m, &data.test, "test")?,
-        ];
-        let p = plausibility(&m, &split_rows(data, "test")?)?;
-        (r, p)
+/// Why the loop stopped.
+#[derive(Clone, Debug, Serialize)]
+#[serde(tag = "reason", rename_all = "snake_case")]
+pub enum StopReason {
+    /// No family explained more residual variance than chance.
+    NothingBeatChance,
+    /// Families beat chance but none can be declared in F (or all are declared already).
+    NotDeclarable {
+        /// The significant families.
+        families: Vec<String>,
+    },
+    /// The added effect did not lower B's validation MSE and was taken out again.
+    NoValidationGain {
+        /// The family taken out.
+        family: String,
+        /// B's validation MSE before and after adding it.
+        valid: [f64; 2],
+    },
+    /// The round limit was reached.
+    RoundLimit {
+        /// The limit.
+        rounds: usize,
+    },
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopReason::NothingBeatChance => {
+                write!(f, "no family explains more residual variance than chance")
+            }
+            StopReason::NotDeclarable { families } => write!(
+                f,
+                "significant but not declarable as physics (or declared already): {}",
+                families.join(", ")
+            ),
+            StopReason::NoValidationGain { family, valid } => write!(
+                f,
+                "{family} did not lower B's validation MSE ({:.4} → {:.4}) and was taken out of F again",
+                valid[0], valid[1]
+            ),
+            StopReason::RoundLimit { rounds } => {
+                write!(f, "the round limit ({rounds}) was reached")
+            }
+        }
+    }
+}
+
+/// An effect tried directly on top of the last F kept.
+#[derive(Clone, Debug, Serialize)]
+pub struct DirectTest {
+    /// Its family.
+    pub family: String,
+    /// B's scores with it.
+    pub b: Scores,
+    /// C's scores with it.
+    pub c: Scores,
+}
+
+/// What the loop did.
+#[derive(Clone, Debug, Serialize)]
+pub struct LoopReport {
+    /// The problem.
+    pub problem: String,
+    /// F's name.
+    pub physics: String,
+    /// Where the data came from.
+    pub data: String,
+    /// The rounds.
+    pub rounds: Vec<Round>,
+    /// Why it stopped.
+    pub stop: StopReason,
+    /// Direct tests of effects the loop did not add.
+    pub direct: Vec<DirectTest>,
+}
+
+impl LoopReport {
+    /// The first round (the plain F).
+    pub fn first(&self) -> &Round {
+        &self.rounds[0]
+    }
+
+    /// The last round whose F was kept.
+    pub fn last_kept(&self) -> &Round {
+        self.rounds
+            .iter()
+            .rev()
+            .find(|r| r.kept)
+            .unwrap_or(&self.rounds[0])
+    }
+
+    /// The effects the loop added and kept, as `family (explained vs chance)`.
+    pub fn added(&self) -> Vec<String> {
+        self.rounds
+            .iter()
+            .filter(|r| r.kept)
+            .filter_map(|r| r.added.as_ref().map(Candidate::short))
+            .collect()
+    }
+}
+
+/// Scores a trained model on the problem's data.
+pub fn scores<P: Problem + ?Sized>(problem: &P, m: &Model<'_>) -> Result<Scores> {
+    let r = evaluate_splits(m, problem.data())?;
+    let phys = |i: usize| r[i].physics_mse.unwrap_or(f64::NAN);
+    Ok(Scores {
+        mse: [r[0].mse, r[1].mse, r[2].mse],
+        physics: [phys(0), phys(1), phys(2)],
+        correction_ms: r[2].correction_ms.unwrap_or(0.0),
+        metrics: problem.metrics(m)?,
+    })
+}
+
+/// B and C trained with `effects`, their scores and model files (written into `dir` as
+/// `<tag>_B.magic`, `<tag>_C.magic`).
+fn train_pair<P: Problem + ?Sized>(
+    problem: &P,
+    effects: &[OwnedEffect],
+    opts: &LoopOptions,
+    dir: &Path,
+    tag: &str,
+) -> Result<[(Scores, Vec<u8>); 2]> {
+    let one = |kind: ModelKind| -> Result<(Scores, Vec<u8>)> {
+        let (m, _) = train_model(problem, kind, effects, &opts.train, opts.seed)?;
+        let bytes = m.encode()?;
+        std::fs::write(dir.join(format!("{tag}_{kind:?}.magic")), &bytes)?;
+        let s = scores(problem, &Model::decode(&bytes)?)?;
+        Ok((s, bytes))
     };
-    Ok((
-        Scores {
-            mse: [r[0].mse, r[1].mse, r[2].mse],
-            physics_test: r[2].physics_mse,
-            plausible_share: share,
-            peak_dv,
-            peak_depth,
-        },
-        bytes,
-    ))
+    Ok([one(ModelKind::B)?, one(ModelKind::C)?])
 }
 
-/// Runs the loop and writes the report into `dir`.
-pub fn run(data: &GnssData, opts: &LoopOptions, dir: &Path) -> Result<Vec<Round>> {
+fn describe_f<P: Problem + ?Sized>(problem: &P, effects: &[OwnedEffect]) -> String {
+    std::iter::once(problem.physics_name())
+        .chain(effects.iter().map(OwnedEffect::family))
+        .collect::<Vec<_>>()
+        .join(" + ")
+}
+
+/// Runs the loop on `problem` and writes the report (`report.md`, `report.json`, PNG figures,
+/// every round's model files) into `dir`.
+pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> Result<LoopReport> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let mut effects: Vec<OwnedEffect> = Vec::new();
     let mut rounds: Vec<Round> = Vec::new();
-    let mut added: Option<CandidateSummary> = None;
-    let mut first_b: Option<Vec<u8>> = None;
-    let mut last_b: Vec<u8> = Vec::new();
-    for round in 0..=opts.max_rounds {
-        eprintln!(
-            "round {round}: F = Mogi{}",
-            effects
-                .iter()
-                .map(|e| format!(" + {}", e.family()))
-                .collect::<String>()
-        );
-        let (bm, _) = train_mogi_with(data, Variant::B, &effects, &opts.train, opts.seed)?;
-        let (cm, _) = train_mogi_with(data, Variant::C, &effects, &opts.train, opts.seed)?;
-        let (b, bbytes) = scores(&bm, data)?;
-        let (c, _) = scores(&cm, data)?;
-        std::fs::write(dir.join(format!("round{round}_B.magic")), &bbytes)?;
-        let classical = if opts.classical {
-            Some(fit_split(data, "test", &effects)?)
+    let mut added: Option<Candidate> = None;
+    let mut models: Vec<Vec<u8>> = Vec::new();
+    let stop = loop {
+        let round = rounds.len();
+        eprintln!("round {round}: F = {}", describe_f(problem, &effects));
+        let [(b, bbytes), (c, _)] =
+            train_pair(problem, &effects, opts, dir, &format!("round{round}"))?;
+        let baseline = if opts.baseline {
+            problem.baseline(&effects)?
         } else {
-            None
+            vec![]
         };
         let analysis = {
-            let model = Model::decode(&bbytes).map_err(|e| anyhow!("{e}"))?;
-            analyse(&model, data, &AnalysisOptions::default())?
+            let bm = Model::decode(&bbytes)?;
+            let (analysis, res) = analyse(problem, &bm, &opts.analysis)?;
+            problem.analysis_plots(&res, &analysis, &dir.join(format!("round{round}")))?;
+            analysis
         };
-        let candidates: Vec<CandidateSummary> = analysis
-            .effects
-            .iter()
-            .map(CandidateSummary::from)
-            .collect();
-        let labels: Vec<String> = candidates.iter().map(|c| c.family.clone()).collect();
-        let ve: Vec<f64> = candidates.iter().map(|c| c.variance_explained).collect();
-        let ch: Vec<f64> = candidates.iter().map(|c| c.chance_level).collect();
-        if !labels.is_empty() {
-            plots::bar_chart(
-                &dir.join(format!("round{round}_effects.png")),
-                &format!("round {round}: residual variance explained (bars) vs chance (ticks)"),
-                &labels,
-                &ve,
-                &ch,
-            )?;
-        }
+        eprint!("{}", analysis.table());
+        let previous_valid = rounds.last().map(|r: &Round| r.b.mse[1]);
         rounds.push(Round {
             round,
             effects: effects.iter().map(|e| e.family().to_string()).collect(),
             added: added.take(),
             b,
             c,
-            classical_test_mse: classical.as_ref().map(|r| r.mse),
-            classical: classical.as_ref().map(|r| {
-                json!({"test_mse": r.mse, "plausible_share": r.plausible_share, "peak_dv": r.peak_dv, "peak_depth": r.peak_depth, "peak_date": r.peak_date})
-            }),
-            candidates,
-            stop: String::new(),
+            baseline,
+            candidates: analysis.effects.clone(),
+            kept: true,
         });
-        if first_b.is_none() {
-            first_b = Some(bbytes.clone());
-        }
-        last_b = bbytes;
-        if round == opts.max_rounds {
-            if let Some(r) = rounds.last_mut() {
-                r.stop = format!("the round limit ({}) was reached", opts.max_rounds);
+        models.push(bbytes);
+        let last = rounds.len() - 1;
+        if let Some(before) = previous_valid {
+            let after = rounds[last].b.mse[1];
+            if after >= before {
+                let family = effects.pop().map_or("?".into(), |e| e.family().to_string());
+                rounds[last].kept = false;
+                break StopReason::NoValidationGain {
+                    family,
+                    valid: [before, after],
+                };
             }
-            break;
         }
-        let have: Vec<&str> = effects.iter().map(|e| e.family()).collect();
-        let next = analysis
-            .effects
-            .iter()
-            .find(|c| c.significant && c.effect.is_some() && !have.contains(&c.family.as_str()));
-        match next {
-            Some(c) => {
-                effects.push(
-                    c.effect
-                        .clone()
-                        .ok_or_else(|| anyhow!("candidate without an effect"))?,
-                );
-                added = Some(CandidateSummary::from(c));
+        if round == opts.max_rounds {
+            break StopReason::RoundLimit {
+                rounds: opts.max_rounds,
+            };
+        }
+        let declared: Vec<&str> = effects.iter().map(OwnedEffect::family).collect();
+        match analysis.top_declarable(&declared) {
+            Some(cand) => {
+                effects.extend(cand.effect.clone());
+                added = Some(cand.clone());
             }
             None => {
-                if let Some(r) = rounds.last_mut() {
-                    r.stop = "no further effect explains more residual variance than chance".into();
-                }
-                break;
+                let found: Vec<String> = analysis
+                    .effects
+                    .iter()
+                    .filter(|c| c.significant)
+                    .map(|c| c.family.clone())
+                    .collect();
+                break if found.is_empty() {
+                    StopReason::NothingBeatChance
+                } else {
+                    StopReason::NotDeclarable { families: found }
+                };
             }
         }
-    }
-    let first = first_b.ok_or_else(|| anyhow!("no round ran"))?;
-    before_after_plots(data, &first, &last_b, dir)?;
-    write_report(data, &rounds, dir)?;
-    Ok(rounds)
-}
-
-/// Time series of one station's vertical (observed, B before, B after) on the test split, and
-/// residual maps (mean vertical residual colour, horizontal residual RMS arrows) before and after.
-fn before_after_plots(data: &GnssData, first: &[u8], last: &[u8], dir: &Path) -> Result<()> {
-    let m0 = Model::decode(first).map_err(|e| anyhow!("{e}"))?;
-    let m1 = Model::decode(last).map_err(|e| anyhow!("{e}"))?;
-    let split = &data.test;
-    let days = split.days();
-    let ns = data.names.len();
-    let station = data.names.iter().position(|n| n == "AV08").unwrap_or(0);
-    let c = 2 * ns + station;
-    let mut ws = Workspace::default();
-    let (mut obs_s, mut before, mut after) = (vec![], vec![], vec![]);
-    let mut res = [vec![[0f64; 3]; ns], vec![[0f64; 3]; ns]];
-    for (row, t) in split.x.iter().zip(&days) {
-        let obs: Vec<f32> = row
-            .iter()
-            .enumerate()
-            .map(|(k, v)| data.to_mm(k, *v as f64) as f32)
-            .collect();
-        let i0 = invert_at::<f64>(&m0, &obs, *t, &mut ws).map_err(|e| anyhow!("{e}"))?;
-        let i1 = invert_at::<f64>(&m1, &obs, *t, &mut ws).map_err(|e| anyhow!("{e}"))?;
-        obs_s.push(obs[c] as f64);
-        before.push(i0.physics[c]);
-        after.push(i1.physics[c]);
-        for (k, inv) in [i0, i1].iter().enumerate() {
-            for s in 0..ns {
-                for comp in 0..3 {
-                    let r = obs[comp * ns + s] as f64 - inv.physics[comp * ns + s];
-                    res[k][s][comp] += r * r;
-                }
-            }
+    };
+    let mut direct = Vec::new();
+    for e in problem.direct_tests() {
+        if effects.iter().any(|d| d.family() == e.family()) {
+            continue;
         }
-    }
-    let name = &data.names[station];
-    plots::time_series(
-        &dir.join(format!("timeseries_{name}_up.png")),
-        &format!("{name} vertical (mm), test split: observed, F before and after the loop"),
-        &days,
-        &[
-            ("observed", &obs_s),
-            ("F, round 0", &before),
-            ("F, last round", &after),
-        ],
-    )?;
-    let st: Vec<(String, f64, f64)> = data
-        .names
-        .iter()
-        .zip(&data.stations)
-        .map(|(n, s)| (n.clone(), s.x_km, s.y_km))
-        .collect();
-    let n = split.len().max(1) as f64;
-    for (k, label) in ["before", "after"].iter().enumerate() {
-        let vec: Vec<(f64, f64)> = res[k]
-            .iter()
-            .map(|r| ((r[0] / n).sqrt(), (r[1] / n).sqrt()))
-            .collect();
-        let val: Vec<f64> = res[k].iter().map(|r| (r[2] / n).sqrt()).collect();
-        plots::station_map(
-            &dir.join(format!("residual_map_{label}.png")),
-            &format!("residual RMS of F {label} the loop (arrows: E, N; colour: U), test split"),
-            &st,
-            &vec,
-            &val,
-        )?;
-    }
-    Ok(())
-}
-
-fn write_report(data: &GnssData, rounds: &[Round], dir: &Path) -> Result<()> {
-    let mut md = String::new();
-    let _ = writeln!(md, "# The loop on {}\n", data.source);
-    let _ = writeln!(md, "MSE in standardised units (paper Table 4: A 0.632, B 0.810, C 0.711). Plausible: share of test days with depth < 10 km and |ΔV| < 5·10⁶ m³.\n");
-    let _ = writeln!(
-        md,
-        "Classical: the per-day Levenberg–Marquardt fit of the same F (no encoder).\n"
-    );
-    let _ = writeln!(md, "| round | F | added (excess over chance) | B train / valid / test | B physics-only test | C test | classical test | B plausible | B peak ΔV @ depth |");
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
-    for r in rounds {
-        let f = if r.effects.is_empty() {
-            "Mogi".to_string()
-        } else {
-            format!("Mogi + {}", r.effects.join(" + "))
-        };
-        let a = r.added.as_ref().map_or("–".to_string(), |c| {
-            format!(
-                "{} ({:.3} vs chance {:.3})",
-                c.family, c.variance_explained, c.chance_level
-            )
+        eprintln!(
+            "direct test: F = {} + {}",
+            describe_f(problem, &effects),
+            e.family()
+        );
+        let mut with = effects.clone();
+        with.push(e.clone());
+        let [(b, _), (c, _)] = train_pair(problem, &with, opts, dir, e.family())?;
+        direct.push(DirectTest {
+            family: e.family().to_string(),
+            b,
+            c,
         });
-        let _ = writeln!(
-            md,
-            "| {} | {f} | {a} | {:.4} / {:.4} / {:.4} | {:.4} | {:.4} | {} | {:.0} % | {:.2} @ {:.1} km |",
-            r.round,
-            r.b.mse[0],
-            r.b.mse[1],
-            r.b.mse[2],
-            r.b.physics_test.unwrap_or(f64::NAN),
-            r.c.mse[2],
-            r.classical_test_mse.map_or("–".into(), |v| format!("{v:.4}")),
-            100.0 * r.b.plausible_share,
-            r.b.peak_dv,
-            r.b.peak_depth
-        );
     }
-    if let Some(r) = rounds.last() {
-        let _ = writeln!(
-            md,
-            "\nThe loop stopped after round {}: {}.",
-            r.round, r.stop
-        );
-    }
-    let _ = writeln!(md, "\n## Candidates per round (B's residuals)\n");
-    for r in rounds {
-        let _ = writeln!(md, "Round {}:\n\n| family | variance explained (held out) | chance | significant | params |\n|---|---|---|---|---|", r.round);
-        for c in &r.candidates {
-            let _ = writeln!(
-                md,
-                "| {} | {:.4} | {:.4} | {} | `{}` |",
-                c.family, c.variance_explained, c.chance_level, c.significant, c.params
-            );
-        }
-        let _ = writeln!(
-            md,
-            "\n![effects, round {0}](round{0}_effects.png)\n",
-            r.round
-        );
-    }
-    let _ = writeln!(md, "## Before and after\n\n![time series](timeseries_AV08_up.png)\n\n![before](residual_map_before.png) ![after](residual_map_after.png)");
-    std::fs::write(dir.join("report.md"), md)?;
-    std::fs::write(
-        dir.join("report.json"),
-        serde_json::to_string_pretty(&json!({"data": data.source, "rounds": rounds}))?,
+    let kept = rounds.iter().rposition(|r| r.kept).unwrap_or(0);
+    let plots = problem.loop_plots(
+        &Model::decode(&models[0])?,
+        &Model::decode(&models[kept])?,
+        dir,
     )?;
-    Ok(())
+    let out = LoopReport {
+        problem: problem.name().to_string(),
+        physics: problem.physics_name().to_string(),
+        data: problem.data().source.clone(),
+        rounds,
+        stop,
+        direct,
+    };
+    report::loop_report::write(&out, &plots, dir)?;
+    Ok(out)
 }

@@ -2,15 +2,15 @@
 //! synthetic dataset on the same network), evaluate, export int8, and run the test days through
 //! the firmware under QEMU, then print the results table.
 
-use crate::data::{self, gnss::GnssData};
-use crate::eval::{evaluate, EvalResult};
-use crate::pipeline::train_mogi;
-use crate::records::{self, ObsRow};
-use crate::synth;
-use crate::train::{TrainConfig, TrainLog};
+use crate::data::records;
+use crate::data::{self, SplitName};
+use crate::eval::{evaluate_splits, EvalResult};
+use crate::gnss::plausibility::plausibility;
+use crate::gnss::{synth, GnssProblem};
+use crate::train::{train_model, ModelKind, TrainConfig, TrainLog};
 use anyhow::{anyhow, Context, Result};
 use magic_core::mogi::PARAM_NAMES;
-use magic_core::{invert_at, Model, Variant, Workspace};
+use magic_core::Model;
 use serde_json::json;
 use std::path::Path;
 
@@ -20,32 +20,10 @@ pub struct Scores {
     pub splits: Vec<EvalResult>,
 }
 
-fn scores(bytes: &[u8], data: &GnssData) -> Result<Scores> {
-    let m = Model::decode(bytes).map_err(|e| anyhow!("{e}"))?;
+fn scores(bytes: &[u8], p: &GnssProblem) -> Result<Scores> {
     Ok(Scores {
-        splits: vec![
-            evaluate(&m, &data.train, "train")?,
-            evaluate(&m, &data.valid, "valid")?,
-            evaluate(&m, &data.test, "test")?,
-        ],
+        splits: evaluate_splits(&Model::decode(bytes)?, &p.data)?.to_vec(),
     })
-}
-
-/// Observation rows (mm) of a split.
-pub fn split_rows(data: &GnssData, split: &str) -> Result<Vec<ObsRow>> {
-    let s = data.split(split)?;
-    Ok(s.x
-        .iter()
-        .zip(&s.dates)
-        .map(|(x, d)| ObsRow {
-            date: Some(d.clone()),
-            obs: Ok(x
-                .iter()
-                .enumerate()
-                .map(|(c, v)| data.to_mm(c, *v as f64) as f32)
-                .collect()),
-        })
-        .collect())
 }
 
 /// Largest absolute difference per parameter between two sets of result lines.
@@ -79,13 +57,14 @@ pub fn run(
     out: &Path,
     qemu: bool,
 ) -> Result<()> {
-    let data = match data::locate(data_dir, "gnss") {
-        Some(d) => GnssData::read(&d)?,
+    let p = match data::locate(data_dir, "gnss") {
+        Some(d) => GnssProblem::read(&d)?,
         None => {
             eprintln!("no GNSS data found (--data-dir, $MAGIC_DATA, ../shared/data): using the built-in synthetic dataset");
-            synth::generate(synth::Scenario::Clean, seed).data
+            synth::generate(synth::Scenario::Clean, seed).problem
         }
     };
+    let data = &p.data;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     eprintln!(
         "data: {} ({} / {} / {} days)",
@@ -99,15 +78,15 @@ pub fn run(
         ..TrainConfig::gnss()
     };
     let mut table = Vec::new();
-    let mut logs: Vec<(Variant, TrainLog)> = Vec::new();
+    let mut logs: Vec<(ModelKind, TrainLog)> = Vec::new();
     let mut c_model = None;
-    for variant in [Variant::C, Variant::B] {
-        let (model, log) = train_mogi(&data, variant, &cfg, seed)?;
+    for kind in [ModelKind::C, ModelKind::B] {
+        let (model, log) = train_model(&p, kind, &[], &cfg, seed)?;
         let bytes = model.encode()?;
-        std::fs::write(out.join(format!("mogi_{variant:?}.magic")), &bytes)?;
-        table.push((format!("{variant:?} (f32)"), scores(&bytes, &data)?));
-        logs.push((variant, log));
-        if variant == Variant::C {
+        std::fs::write(out.join(format!("mogi_{kind:?}.magic")), &bytes)?;
+        table.push((format!("{kind:?} (f32)"), scores(&bytes, &p)?));
+        logs.push((kind, log));
+        if kind == ModelKind::C {
             c_model = Some(model);
         }
     }
@@ -116,13 +95,13 @@ pub fn run(
     let qbytes = q.encode()?;
     let qpath = out.join("mogi_C_int8.magic");
     std::fs::write(&qpath, &qbytes)?;
-    table.push(("C (int8)".to_string(), scores(&qbytes, &data)?));
+    table.push(("C (int8)".to_string(), scores(&qbytes, &p)?));
 
     // f32 vs int8 on the test days, in physical units.
     let fbytes = c_model.encode()?;
-    let fm = Model::decode(&fbytes).map_err(|e| anyhow!("{e}"))?;
-    let qm = Model::decode(&qbytes).map_err(|e| anyhow!("{e}"))?;
-    let rows = split_rows(&data, "test")?;
+    let fm = Model::decode(&fbytes)?;
+    let qm = Model::decode(&qbytes)?;
+    let rows = records::split_rows(data, SplitName::Test);
     let f_lines = records::invert_rows(&fm, &rows);
     let q_lines = records::invert_rows(&qm, &rows);
     let quant_diff = max_param_diff(&f_lines, &q_lines, 4);
@@ -160,7 +139,7 @@ pub fn run(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let plaus = plausibility(&qm, &rows)?;
+    let plaus = plausibility(&qm, data, SplitName::Test)?;
     println!(
         "2008-like event (test period): peak ΔV {:.2}·10⁶ m³ at depth {:.1} km; {:.0} % of test days with depth < 10 km and |ΔV| < 5·10⁶ m³",
         plaus.0, plaus.1, 100.0 * plaus.2
@@ -172,7 +151,7 @@ pub fn run(
         "int8_max_param_diff": quant_diff,
     });
     if qemu {
-        let fw = crate::demo_qemu::run_test_days(&qpath, &qm, &rows, &q_lines)?;
+        let fw = crate::firmware::run_test_days(&qpath, &qm, &rows, &q_lines)?;
         summary["firmware"] = fw;
     }
     std::fs::write(
@@ -181,22 +160,4 @@ pub fn run(
     )?;
     println!("\nmodels and results in {}", out.display());
     Ok(())
-}
-
-/// Peak ΔV (and the depth then) over the rows, and the share of rows with a plausible source.
-pub fn plausibility(model: &Model<'_>, rows: &[ObsRow]) -> Result<(f64, f64, f64)> {
-    let mut ws = Workspace::default();
-    let (mut peak, mut depth, mut ok, mut n) = (f64::NEG_INFINITY, 0.0, 0usize, 0usize);
-    for r in rows {
-        let Ok(obs) = &r.obs else { continue };
-        let inv = invert_at::<f64>(model, obs, r.day(), &mut ws).map_err(|e| anyhow!("{e}"))?;
-        let (d, dv) = (inv.params[2], inv.params[3]);
-        if dv > peak {
-            peak = dv;
-            depth = d;
-        }
-        ok += usize::from(d < 10.0 && dv.abs() < 5.0);
-        n += 1;
-    }
-    Ok((peak, depth, ok as f64 / n.max(1) as f64))
 }

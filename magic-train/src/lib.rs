@@ -1,35 +1,50 @@
 //! # magic-train
 //!
-//! The host side of **magic**: data readers, the paper's models in candle with the core's physics
-//! as a differentiable op, training, int8 export, evaluation and the `magic` command line.
+//! The host side of **magic**: one trainer for every inversion problem. A [`Problem`] (the
+//! volcano: [`GnssProblem`]; the forest: [`RtmProblem`]) brings its data, its physics with
+//! declared effects, its bounds, its report metrics and its effect [`Family`]s; training
+//! ([`train_model`], one loop around a pluggable [`Objective`]), evaluation ([`evaluate`]), the
+//! residual analysis ([`analyse`]), the loop ([`closed_loop::run`]), the reports and the `magic`
+//! command line ([`cli`]) are written once over those two interfaces.
+//!
+//! The physics is magic-core's, differentiated exactly: [`PhysicsOp`] is a candle op whose
+//! backward pass uses the core's Jacobian (dual numbers). Models are written as magic-core model
+//! files ([`OwnedModel`]), f32 or int8, and run by the same `invert` on the host, in Python and
+//! on the board ([`firmware`]).
+//!
+//! Layout: `problem` · `physics` · `nets` · `train` · `eval` · `model/` · `analysis/` ·
+//! `closed_loop` · `reproduce` · `numerics/` · `report/` · `data/` · `gnss/` · `rtm/` ·
+//! `firmware/` · `cli/`.
+#![deny(missing_docs)]
+// Numerical kernels index several arrays in step (channels, stations, days); iterator chains
+// would hide the indices the equations are written in.
+#![allow(clippy::needless_range_loop)]
 
-pub mod classical;
+pub mod analysis;
+pub mod cli;
 pub mod closed_loop;
 pub mod data;
 pub mod demo;
-pub mod demo_qemu;
 pub mod eval;
-pub mod export;
-pub mod missing;
+pub mod firmware;
+pub mod gnss;
+pub mod model;
 pub mod nets;
+pub mod numerics;
 pub mod physics;
-pub mod pipeline;
-pub mod plots;
-pub mod qemu;
-pub mod records;
+pub mod problem;
+pub mod report;
 pub mod reproduce;
-pub mod residuals;
-pub mod rtm_cli;
-pub mod rtm_loop;
-pub mod rtm_physics;
-pub mod rtm_pipeline;
-pub mod rtm_residuals;
-pub mod synth;
+pub mod rtm;
 pub mod train;
 
-pub use data::gnss::GnssData;
-pub use eval::{evaluate, EvalResult};
-pub use export::OwnedModel;
+pub use analysis::{analyse, Analysis, AnalysisOptions, Candidate, DynFamily, Family};
+pub use data::{Dataset, Split, SplitName};
+pub use eval::{evaluate, evaluate_splits, EvalResult};
+pub use gnss::{GnssProblem, MogiPhysics, Network};
+pub use model::{OwnedEffect, OwnedModel};
 pub use nets::Net;
-pub use physics::{MogiPhysics, Physics, PhysicsOp};
-pub use train::{train, TrainConfig, TrainLog};
+pub use physics::{Physics, PhysicsOp};
+pub use problem::{Metric, Problem};
+pub use rtm::{RtmProblem, RtmTables};
+pub use train::{train_model, ModelKind, Objective, TrainConfig, TrainLog};

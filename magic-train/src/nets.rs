@@ -1,6 +1,7 @@
 //! The paper's networks in candle: dense layers with seeded initialisation, the encoder, the
 //! correction C (eq. 5) and the plain autoencoder's decoder, and the four model variants.
 
+use crate::data::Dataset;
 use crate::physics::{Physics, PhysicsOp};
 use candle_core::{DType, Device, Result, Tensor, Var, D};
 use magic_core::nn::Activation;
@@ -105,6 +106,9 @@ pub struct Outputs {
     pub physics: Option<Tensor>,
 }
 
+/// A copy of a [`Net`]'s weights: the encoder's layers, and the decoder's if any.
+pub type Snapshot = (Vec<(Tensor, Tensor)>, Option<Vec<(Tensor, Tensor)>>);
+
 /// A trainable model: encoder, optional physics, optional correction / decoder.
 pub struct Net {
     /// Paper variant.
@@ -134,18 +138,18 @@ pub fn encoder_sizes(n_obs: usize, n_out: usize) -> Vec<usize> {
 }
 
 impl Net {
-    /// Builds a model of `variant`. `physics` and `bounds` are required for B and C.
+    /// Builds a model of `variant` for `data`'s channels and standardisation. `physics` and
+    /// `bounds` are required for B and C; `latent` is A's code size.
     pub fn new(
         variant: Variant,
-        n_obs: usize,
+        data: &Dataset,
         physics: Option<Arc<dyn Physics>>,
         bounds: Vec<[f64; 2]>,
-        mean: Vec<f64>,
-        scale: Vec<f64>,
         latent: usize,
         rng: &mut StdRng,
     ) -> Result<Net> {
         let dev = Device::Cpu;
+        let (n_obs, mean, scale) = (data.n_obs(), data.mean.clone(), data.scale.clone());
         let (encoder, decoder) = match variant {
             Variant::A => {
                 let enc = Mlp::new(
@@ -256,7 +260,7 @@ impl Net {
     }
 
     /// Snapshot of all weights.
-    pub fn snapshot(&self) -> Result<(Vec<(Tensor, Tensor)>, Option<Vec<(Tensor, Tensor)>>)> {
+    pub fn snapshot(&self) -> Result<Snapshot> {
         Ok((
             self.encoder.snapshot()?,
             self.decoder.as_ref().map(|d| d.snapshot()).transpose()?,
@@ -264,10 +268,7 @@ impl Net {
     }
 
     /// Restores a snapshot.
-    pub fn restore(
-        &self,
-        s: &(Vec<(Tensor, Tensor)>, Option<Vec<(Tensor, Tensor)>>),
-    ) -> Result<()> {
+    pub fn restore(&self, s: &Snapshot) -> Result<()> {
         self.encoder.restore(&s.0)?;
         if let (Some(d), Some(ds)) = (&self.decoder, &s.1) {
             d.restore(ds)?;

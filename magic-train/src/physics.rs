@@ -11,11 +11,7 @@
 //! while training and the backward pass reuse them (see there); the op cannot know in its forward
 //! pass whether a backward pass will follow, so the choice adapts to what the last passes did.
 
-use crate::export::OwnedEffect;
 use candle_core::{CpuStorage, CustomOp1, Layout, Shape, Tensor};
-use magic_core::effects::mogi_with_effects;
-use magic_core::mogi::{self, Station};
-use magic_core::Dual;
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -113,82 +109,6 @@ impl JacobianReuse {
                 None
             }
         }
-    }
-}
-
-/// The Mogi source under a station network, with declared effects.
-#[derive(Clone, Debug)]
-pub struct MogiPhysics {
-    /// Stations in channel order.
-    pub stations: Vec<Station>,
-    /// Declared effects (latent variables follow the source's four).
-    pub effects: Vec<OwnedEffect>,
-}
-
-impl MogiPhysics {
-    /// The source alone.
-    pub fn new(stations: Vec<Station>) -> Self {
-        MogiPhysics {
-            stations,
-            effects: vec![],
-        }
-    }
-}
-
-/// Largest number of variables the trainer differentiates for (source plus effect latents).
-const MAX_DUAL: usize = 16;
-
-impl Physics for MogiPhysics {
-    fn n_params(&self) -> usize {
-        mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
-    }
-    fn n_obs(&self) -> usize {
-        3 * self.stations.len()
-    }
-    fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), magic_core::Error> {
-        let bytes: Vec<_> = self.effects.iter().map(OwnedEffect::bytes).collect();
-        let eff: Vec<_> = self
-            .effects
-            .iter()
-            .zip(&bytes)
-            .map(|(e, b)| e.borrow(b))
-            .collect();
-        mogi_with_effects(&self.stations, &eff, p, t, out)
-    }
-    fn jacobian(
-        &self,
-        p: &[f64],
-        t: f64,
-        out: &mut [f64],
-        jac: &mut [f64],
-    ) -> Result<(), magic_core::Error> {
-        let n = self.n_params();
-        if n > MAX_DUAL || p.len() != n {
-            return Err(magic_core::Error::SizeMismatch {
-                what: "variables",
-                expected: n.min(MAX_DUAL),
-                found: p.len(),
-            });
-        }
-        let bytes: Vec<_> = self.effects.iter().map(OwnedEffect::bytes).collect();
-        let eff: Vec<_> = self
-            .effects
-            .iter()
-            .zip(&bytes)
-            .map(|(e, b)| e.borrow(b))
-            .collect();
-        let pd: Vec<Dual<MAX_DUAL>> = p
-            .iter()
-            .enumerate()
-            .map(|(j, v)| Dual::var(*v, j))
-            .collect();
-        let mut o = vec![Dual::<MAX_DUAL>::constant(0.0); out.len()];
-        mogi_with_effects(&self.stations, &eff, &pd, t, &mut o)?;
-        for (c, oc) in o.iter().enumerate() {
-            out[c] = oc.v;
-            jac[c * n..(c + 1) * n].copy_from_slice(&oc.d[..n]);
-        }
-        Ok(())
     }
 }
 
@@ -314,22 +234,27 @@ impl CustomOp1 for PhysicsOp {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gnss::MogiPhysics;
     use candle_core::{Device, Var};
+    use magic_core::mogi::Station;
 
     #[test]
     fn gradient_through_op_matches_finite_differences() {
-        let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(vec![
-            Station {
-                x_km: -4.0,
-                y_km: 6.0,
-                z_km: 0.3,
-            },
-            Station {
-                x_km: 10.0,
-                y_km: 0.5,
-                z_km: 0.4,
-            },
-        ]));
+        let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(
+            vec![
+                Station {
+                    x_km: -4.0,
+                    y_km: 6.0,
+                    z_km: 0.3,
+                },
+                Station {
+                    x_km: 10.0,
+                    y_km: 0.5,
+                    z_km: 0.4,
+                },
+            ],
+            vec![],
+        ));
         let dev = Device::Cpu;
         let z0 = [1.0f64, -0.5, 6.0, 2.0];
         let z = Var::from_vec(vec![1.0, -0.5, 6.0, 2.0, f64::NAN], (1, 5), &dev).unwrap();

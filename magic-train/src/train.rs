@@ -1,18 +1,59 @@
-//! Training with the paper's recipe (A.7, A.8): AdamW (lr 1e-3, weight decay 1e-4), learning rate
-//! ×0.1 after 50 epochs, at most 100 epochs, early stop after 10 epochs without validation gain
-//! (the best weights are kept), and for sequential data (GNSS) batches of 12 sequences × 5
-//! consecutive days with the smoothness term of eq. 19 on F's output (λ = 0.01, B and C).
+//! Training, written once for every problem and model kind: the paper's recipe (A.7, A.8) —
+//! AdamW (lr 1e-3, weight decay 1e-4), learning rate ×0.1 after 50 epochs, at most 100 epochs,
+//! early stop after 10 epochs without validation gain (the best weights are kept) — around a
+//! pluggable [`Objective`]:
 //!
-//! The paper used PyTorch's Adam with (coupled) L2 weight decay; candle offers AdamW (decoupled
-//! decay), which is what is used here.
+//! * [`Reconstruction`] (A, B, C): the MSE of the reconstruction, plus for sequential data (GNSS:
+//!   batches of 12 sequences × 5 consecutive days) the smoothness term of eq. 19 on F's output;
+//! * [`Regression`] (D, the paper's regressor baseline): the encoder regresses the normalised
+//!   variables of spectra simulated by F.
+//!
+//! [`train_model`] builds the network of a model kind for a [`Problem`], trains it and returns
+//! the f32 model file. The paper used PyTorch's Adam with (coupled) L2 weight decay; candle offers
+//! AdamW (decoupled decay), which is what is used here.
 
+use crate::model::{OwnedEffect, OwnedModel};
 use crate::nets::{days_tensor, mse, smoothness, to_tensor, Net};
-use anyhow::Result;
+use crate::physics::Physics;
+use crate::problem::Problem;
+use anyhow::{anyhow, bail, Result};
+use candle_core::{Tensor, Var};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW};
 use indicatif::{ProgressBar, ProgressStyle};
+use magic_core::Variant;
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
 use std::time::Instant;
+
+/// The model kinds of the paper: three autoencoders and the regressor baseline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize)]
+pub enum ModelKind {
+    /// Plain autoencoder (no physics).
+    #[value(name = "A", alias = "a")]
+    A,
+    /// Encoder + F.
+    #[value(name = "B", alias = "b")]
+    B,
+    /// Encoder + F + correction C.
+    #[value(name = "C", alias = "c")]
+    C,
+    /// Regressor: the encoder trained on spectra simulated by F, applied to the real data
+    /// (exported as a variant-B model file: encoder + F).
+    #[value(name = "D", alias = "d")]
+    D,
+}
+
+impl ModelKind {
+    /// The model-file variant it is exported as.
+    pub fn variant(self) -> Variant {
+        match self {
+            ModelKind::A => Variant::A,
+            ModelKind::B | ModelKind::D => Variant::B,
+            ModelKind::C => Variant::C,
+        }
+    }
+}
 
 /// Training hyperparameters.
 #[derive(Clone, Debug)]
@@ -40,7 +81,7 @@ pub struct TrainConfig {
 }
 
 impl TrainConfig {
-    /// The paper's GNSS recipe.
+    /// The paper's GNSS recipe: batches of 12 sequences × 5 consecutive days, λ = 0.01.
     pub fn gnss() -> Self {
         TrainConfig {
             epochs: 100,
@@ -55,6 +96,25 @@ impl TrainConfig {
             progress: true,
         }
     }
+
+    /// The paper's S2 recipe (A.8): batches of 64 independent spectra, no smoothness term.
+    pub fn s2() -> Self {
+        TrainConfig {
+            batch_seqs: 64,
+            seq_len: 1,
+            lambda: 0.0,
+            ..TrainConfig::gnss()
+        }
+    }
+
+    /// This recipe with at most `epochs` epochs and no progress bar when `quiet`.
+    pub fn with(self, epochs: usize, quiet: bool) -> Self {
+        TrainConfig {
+            epochs,
+            progress: self.progress && !quiet,
+            ..self
+        }
+    }
 }
 
 /// What a training run measured.
@@ -62,11 +122,11 @@ impl TrainConfig {
 pub struct TrainLog {
     /// Epochs run.
     pub epochs: usize,
-    /// Epoch (1-based) of the best validation MSE.
+    /// Epoch (1-based) of the best validation loss.
     pub best_epoch: usize,
-    /// Best validation MSE.
+    /// Best validation loss (the reconstruction MSE; D: the variables' MSE on simulated data).
     pub best_valid: f64,
-    /// Mean training loss and validation MSE per epoch.
+    /// Mean training loss and validation loss per epoch.
     pub history: Vec<(f64, f64)>,
     /// Wall-clock seconds in all.
     pub seconds: f64,
@@ -79,6 +139,20 @@ impl TrainLog {
     }
 }
 
+/// What a training run minimises.
+pub trait Objective {
+    /// Name shown on the progress bar.
+    fn label(&self, net: &Net) -> String;
+    /// The variables the optimiser moves.
+    fn vars(&self, net: &Net) -> Vec<Var>;
+    /// The units an epoch shuffles and batches (sequence starts, or samples).
+    fn units(&self) -> Vec<usize>;
+    /// The loss of a batch of units.
+    fn loss(&self, net: &Net, units: &[usize]) -> Result<Tensor>;
+    /// The early-stopping criterion (lower is better).
+    fn valid(&self, net: &Net) -> Result<f64>;
+}
+
 /// Rows of standardised observations with their day numbers.
 #[derive(Clone, Copy)]
 pub struct Rows<'a> {
@@ -88,13 +162,27 @@ pub struct Rows<'a> {
     pub days: &'a [f64],
 }
 
-/// Validation MSE of the final reconstruction (standardised units).
+/// The autoencoders' objective: reconstruction MSE (+ λ × the smoothness of F's output over
+/// consecutive rows, eq. 19, when `seq_len > 1`).
+pub struct Reconstruction<'a> {
+    /// Training rows, in time order when `seq_len > 1`.
+    pub train: Rows<'a>,
+    /// Validation rows.
+    pub valid: Rows<'a>,
+    /// Consecutive rows per sequence.
+    pub seq_len: usize,
+    /// Weight of the smoothness term.
+    pub lambda: f64,
+    /// Smoothness averaged over its elements (else summed, as eq. 19 is printed).
+    pub smooth_mean: bool,
+}
+
+/// Validation MSE of the final reconstruction (standardised units), in chunks of 1 024 rows.
 pub fn valid_mse(net: &Net, data: Rows<'_>) -> Result<f64> {
-    let x = data.x;
-    let n = x.first().map_or(0, |r| r.len());
+    let n = data.x.first().map_or(0, |r| r.len());
     let mut sum = 0.0;
     let mut count = 0usize;
-    for (ci, chunk) in x.chunks(1024).enumerate() {
+    for (ci, chunk) in data.x.chunks(1024).enumerate() {
         let rows: Vec<&[f32]> = chunk.iter().map(|r| r.as_slice()).collect();
         let t = to_tensor(&rows, n)?;
         let d = days_tensor(&data.days[ci * 1024..ci * 1024 + chunk.len()])?;
@@ -106,21 +194,143 @@ pub fn valid_mse(net: &Net, data: Rows<'_>) -> Result<f64> {
     Ok(sum / count.max(1) as f64)
 }
 
-/// Trains `net` on `train` (rows of standardised observations, in time order when `seq_len > 1`),
-/// early-stopping on `valid`.
-pub fn train(
+impl Objective for Reconstruction<'_> {
+    fn label(&self, net: &Net) -> String {
+        format!("train {:?}", net.variant)
+    }
+    fn vars(&self, net: &Net) -> Vec<Var> {
+        net.vars()
+    }
+    fn units(&self) -> Vec<usize> {
+        let t = self.seq_len.max(1);
+        (0..self.train.x.len() / t).map(|i| i * t).collect()
+    }
+    fn loss(&self, net: &Net, starts: &[usize]) -> Result<Tensor> {
+        let t = self.seq_len.max(1);
+        let n = self.train.x.first().map_or(0, |r| r.len());
+        let rows: Vec<&[f32]> = starts
+            .iter()
+            .flat_map(|&s| self.train.x[s..s + t].iter().map(|r| r.as_slice()))
+            .collect();
+        let x = to_tensor(&rows, n)?;
+        let days: Vec<f64> = starts
+            .iter()
+            .flat_map(|&s| self.train.days[s..s + t].iter().copied())
+            .collect();
+        let out = net.forward(&x, &days_tensor(&days)?)?;
+        let mut loss = mse(&out.recon, &x)?;
+        if let (Some(f), true) = (&out.physics, self.lambda > 0.0 && t > 1) {
+            let mut s = smoothness(f, starts.len(), t)?;
+            if self.smooth_mean {
+                s = (s / (starts.len() * (t - 1) * n) as f64)?;
+            }
+            loss = (loss + (s * self.lambda)?)?;
+        }
+        Ok(loss)
+    }
+    fn valid(&self, net: &Net) -> Result<f64> {
+        valid_mse(net, self.valid)
+    }
+}
+
+/// Spectra simulated by F from variables uniform in their bounds.
+pub struct Simulated {
+    /// Normalised variables (in [0, 1]).
+    pub units: Vec<Vec<f32>>,
+    /// Standardised simulated observations.
+    pub x: Vec<Vec<f32>>,
+}
+
+/// `n` observations simulated by `physics` from variables uniform in `bounds` (no date),
+/// standardised with `mean` and `scale`.
+pub fn simulate(
+    physics: &dyn Physics,
+    bounds: &[[f64; 2]],
+    mean: &[f64],
+    scale: &[f64],
+    n: usize,
+    rng: &mut StdRng,
+) -> Result<Simulated> {
+    use rayon::prelude::*;
+    let units: Vec<Vec<f32>> = (0..n)
+        .map(|_| (0..bounds.len()).map(|_| rng.random::<f32>()).collect())
+        .collect();
+    let x = units
+        .par_iter()
+        .map(|u| {
+            let z: Vec<f64> = u
+                .iter()
+                .zip(bounds)
+                .map(|(v, b)| b[0] + (b[1] - b[0]) * *v as f64)
+                .collect();
+            let mut y = vec![0.0; mean.len()];
+            physics
+                .forward(&z, f64::NAN, &mut y)
+                .map_err(|e| anyhow!("simulating observations: {e}"))?;
+            Ok(y.iter()
+                .enumerate()
+                .map(|(c, v)| ((v - mean[c]) / scale[c]) as f32)
+                .collect())
+        })
+        .collect::<Result<Vec<Vec<f32>>>>()?;
+    Ok(Simulated { units, x })
+}
+
+/// The regressor's objective: the encoder's outputs against the normalised variables of
+/// simulated observations (MSE in [0, 1] units), early-stopping on simulated validation data.
+pub struct Regression {
+    /// Simulated training data.
+    pub train: Simulated,
+    /// Simulated validation data.
+    pub valid: Simulated,
+}
+
+impl Regression {
+    fn batch_loss(net: &Net, x: &[&[f32]], u: &[&[f32]]) -> Result<Tensor> {
+        let n = x.first().map_or(0, |r| r.len());
+        let nu = u.first().map_or(0, |r| r.len());
+        let p = net.encoder.forward(&to_tensor(x, n)?)?;
+        Ok(mse(&p, &to_tensor(u, nu)?)?)
+    }
+}
+
+impl Objective for Regression {
+    fn label(&self, _net: &Net) -> String {
+        "train D (regressor)".into()
+    }
+    fn vars(&self, net: &Net) -> Vec<Var> {
+        net.encoder.vars()
+    }
+    fn units(&self) -> Vec<usize> {
+        (0..self.train.x.len()).collect()
+    }
+    fn loss(&self, net: &Net, units: &[usize]) -> Result<Tensor> {
+        let x: Vec<&[f32]> = units.iter().map(|&i| self.train.x[i].as_slice()).collect();
+        let u: Vec<&[f32]> = units
+            .iter()
+            .map(|&i| self.train.units[i].as_slice())
+            .collect();
+        Regression::batch_loss(net, &x, &u)
+    }
+    fn valid(&self, net: &Net) -> Result<f64> {
+        let x: Vec<&[f32]> = self.valid.x.iter().map(|r| r.as_slice()).collect();
+        let u: Vec<&[f32]> = self.valid.units.iter().map(|r| r.as_slice()).collect();
+        Ok(Regression::batch_loss(net, &x, &u)?.to_scalar::<f32>()? as f64)
+    }
+}
+
+/// The training loop: AdamW over the objective's variables, shuffled batches of
+/// `cfg.batch_seqs` units per step, the learning-rate step, early stopping with the best
+/// weights restored.
+pub fn fit(
     net: &Net,
-    train_rows: Rows<'_>,
-    valid: Rows<'_>,
+    objective: &dyn Objective,
     cfg: &TrainConfig,
     rng: &mut StdRng,
 ) -> Result<TrainLog> {
-    let train = train_rows.x;
-    let n = train.first().map_or(0, |r| r.len());
-    let t = cfg.seq_len.max(1);
-    let mut starts: Vec<usize> = (0..train.len() / t).map(|i| i * t).collect();
+    let mut units = objective.units();
     let mut opt = AdamW::new(
-        net.vars(),
+        objective.vars(net),
         ParamsAdamW {
             lr: cfg.lr,
             weight_decay: cfg.weight_decay,
@@ -137,7 +347,7 @@ pub fn train(
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    bar.set_prefix(format!("train {:?}", net.variant));
+    bar.set_prefix(objective.label(net));
     let start = Instant::now();
     let mut log = TrainLog {
         best_valid: f64::INFINITY,
@@ -149,33 +359,16 @@ pub fn train(
         if epoch == cfg.lr_step + 1 {
             opt.set_learning_rate(cfg.lr * 0.1);
         }
-        starts.shuffle(rng);
+        units.shuffle(rng);
         let mut loss_sum = 0.0;
         let mut batches = 0usize;
-        for group in starts.chunks(cfg.batch_seqs) {
-            let rows: Vec<&[f32]> = group
-                .iter()
-                .flat_map(|&s| train[s..s + t].iter().map(|r| r.as_slice()))
-                .collect();
-            let x = to_tensor(&rows, n)?;
-            let days: Vec<f64> = group
-                .iter()
-                .flat_map(|&s| train_rows.days[s..s + t].iter().copied())
-                .collect();
-            let out = net.forward(&x, &days_tensor(&days)?)?;
-            let mut loss = mse(&out.recon, &x)?;
-            if let (Some(f), true) = (&out.physics, cfg.lambda > 0.0 && t > 1) {
-                let mut s = smoothness(f, group.len(), t)?;
-                if cfg.smooth_mean {
-                    s = (s / (group.len() * (t - 1) * n) as f64)?;
-                }
-                loss = (loss + (s * cfg.lambda)?)?;
-            }
+        for group in units.chunks(cfg.batch_seqs) {
+            let loss = objective.loss(net, group)?;
             opt.backward_step(&loss)?;
             loss_sum += loss.to_scalar::<f32>()? as f64;
             batches += 1;
         }
-        let v = valid_mse(net, valid)?;
+        let v = objective.valid(net)?;
         let train_loss = loss_sum / batches.max(1) as f64;
         log.history.push((train_loss, v));
         log.epochs = epoch;
@@ -197,4 +390,66 @@ pub fn train(
     net.restore(&best)?;
     log.seconds = start.elapsed().as_secs_f64();
     Ok(log)
+}
+
+/// Number of simulated observations for the regressor D (the paper's split sizes of the S2 data:
+/// 11 520 / 2 880).
+pub const D_SAMPLES: [usize; 2] = [11_520, 2_880];
+
+/// Trains a model of `kind` for `problem` with declared `effects` (training on the problem's
+/// training split, early stopping on its validation split) and returns the f32 model file with
+/// its log and its residual threshold set on the validation split.
+pub fn train_model<P: Problem + ?Sized>(
+    problem: &P,
+    kind: ModelKind,
+    effects: &[OwnedEffect],
+    cfg: &TrainConfig,
+    seed: u64,
+) -> Result<(OwnedModel, TrainLog)> {
+    if kind == ModelKind::D && !effects.is_empty() {
+        bail!("the regressor D is trained on simulated observations without dates: no effects");
+    }
+    problem.check_effects(effects)?;
+    let mut rng = StdRng::seed_from_u64(seed);
+    let data = problem.data();
+    let physics = problem.physics(effects)?;
+    let bounds = problem.bounds(effects);
+    let net = Net::new(
+        kind.variant(),
+        data,
+        (kind != ModelKind::A).then_some(physics.clone()),
+        bounds.clone(),
+        problem.bounds(&[]).len(),
+        &mut rng,
+    )?;
+    let log = match kind {
+        ModelKind::D => {
+            let sim = |n, rng: &mut StdRng| {
+                simulate(physics.as_ref(), &bounds, &data.mean, &data.scale, n, rng)
+            };
+            let train = sim(D_SAMPLES[0], &mut rng)?;
+            let valid = sim(D_SAMPLES[1], &mut rng)?;
+            fit(&net, &Regression { train, valid }, cfg, &mut rng)?
+        }
+        _ => {
+            let (td, vd) = (data.train.days(), data.valid.days());
+            let objective = Reconstruction {
+                train: Rows {
+                    x: &data.train.x,
+                    days: &td,
+                },
+                valid: Rows {
+                    x: &data.valid.x,
+                    days: &vd,
+                },
+                seq_len: cfg.seq_len,
+                lambda: cfg.lambda,
+                smooth_mean: cfg.smooth_mean,
+            };
+            fit(&net, &objective, cfg, &mut rng)?
+        }
+    };
+    let mut model = OwnedModel::from_net(&net, problem.spec()?, effects.to_vec())?;
+    model.residual_threshold = model.residual_threshold(&data.valid)?;
+    Ok((model, log))
 }

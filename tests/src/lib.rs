@@ -1,11 +1,8 @@
 //! Helpers shared by the cross-crate integration tests in `tests/tests/`.
 
 use magic_core::Variant;
-use magic_train::export::OwnedModel;
-use magic_train::nets::Net;
-use magic_train::physics::{MogiPhysics, Physics};
-use magic_train::pipeline::mogi_problem;
-use magic_train::synth;
+use magic_train::gnss::synth;
+use magic_train::{MogiPhysics, Net, OwnedModel, Physics};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::path::PathBuf;
@@ -30,24 +27,58 @@ pub fn shared_data() -> PathBuf {
 /// with standardisation from the synthetic dataset, as an owned f32 model.
 pub fn random_mogi_model(variant: Variant, seed: u64) -> OwnedModel {
     let s = synth::generate(synth::Scenario::Clean, seed);
-    let d = &s.data;
+    let (d, network) = (&s.problem.data, &s.problem.network);
     let mut rng = StdRng::seed_from_u64(seed);
-    let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(d.stations.clone()));
+    let phys: Arc<dyn Physics> = Arc::new(MogiPhysics::new(network.stations.clone(), vec![]));
     let net = Net::new(
         variant,
-        d.n_obs(),
+        d,
         (variant != Variant::A).then_some(phys),
         magic_core::mogi::PAPER_BOUNDS.to_vec(),
-        d.mean.clone(),
-        d.scale.clone(),
         4,
         &mut rng,
     )
     .expect("network");
-    OwnedModel::from_net(
-        &net,
-        mogi_problem(&d.names, &d.stations).expect("problem"),
-        vec![],
-    )
-    .expect("model")
+    OwnedModel::from_net(&net, network.spec().expect("problem"), vec![]).expect("model")
+}
+
+/// The `magic` command of this build: `cargo build -p magic-train --bin magic` in the profile the
+/// tests were built with (a no-op when it is up to date), once per test binary.
+pub fn magic_bin() -> PathBuf {
+    static BIN: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    BIN.get_or_init(|| {
+        let exe = std::env::current_exe().expect("the test's own path");
+        // target/<profile>/deps/<test> → target/<profile>
+        let dir = exe
+            .parent()
+            .and_then(|d| d.parent())
+            .expect("tests run from target/<profile>/deps")
+            .to_path_buf();
+        let profile = dir
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("release")
+            .to_string();
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = std::process::Command::new(cargo);
+        cmd.args(["build", "--quiet", "-p", "magic-train", "--bin", "magic"]);
+        match profile.as_str() {
+            "debug" => {}
+            "release" => {
+                cmd.arg("--release");
+            }
+            other => {
+                cmd.args(["--profile", other]);
+            }
+        }
+        let status = cmd
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .status()
+            .expect("cargo runs");
+        assert!(status.success(), "building the magic command failed");
+        let bin = dir.join(format!("magic{}", std::env::consts::EXE_SUFFIX));
+        assert!(bin.is_file(), "{} not found after building", bin.display());
+        bin
+    })
+    .clone()
 }

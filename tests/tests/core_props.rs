@@ -10,7 +10,7 @@ use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::quant::{quantize, requantize};
 use magic_core::{invert, Flags, Real, Variant, Workspace};
 use magic_tests::random_mogi_model;
-use magic_train::synth;
+use magic_train::gnss::synth;
 use proptest::prelude::*;
 use std::sync::OnceLock;
 
@@ -18,7 +18,12 @@ use std::sync::OnceLock;
 fn models() -> &'static [Model<'static>] {
     static M: OnceLock<Vec<Model<'static>>> = OnceLock::new();
     M.get_or_init(|| {
-        let calib = synth::generate(synth::Scenario::Clean, 11).data.train.x[..200].to_vec();
+        let calib = synth::generate(synth::Scenario::Clean, 11)
+            .problem
+            .data
+            .train
+            .x[..200]
+            .to_vec();
         let c = random_mogi_model(Variant::C, 11);
         let files = [
             c.quantize_int8(&calib).unwrap().encode().unwrap(),

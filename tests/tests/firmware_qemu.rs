@@ -15,8 +15,10 @@
 use magic_core::model_file::{Model, Variant};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::nn::Activation;
-use magic_train::export::{OwnedEffect, OwnedLayer, OwnedModel, OwnedWeights};
-use magic_train::qemu::{build_firmware, build_firmware_with, ensure_toolchain, run_firmware};
+use magic_train::firmware::qemu::{
+    build_firmware, build_firmware_with, ensure_toolchain, run_firmware,
+};
+use magic_train::model::{OwnedEffect, OwnedLayer, OwnedModel, OwnedWeights};
 use std::path::PathBuf;
 
 const N_STATIONS: usize = 12;
@@ -107,14 +109,19 @@ fn model_bytes_with(effects: Vec<OwnedEffect>) -> Vec<u8> {
         })
         .collect();
     let names: Vec<String> = (0..N_STATIONS).map(|i| format!("S{i:02}")).collect();
-    let problem = magic_train::pipeline::mogi_problem(&names, &st).unwrap();
+    let problem = magic_train::Network {
+        names,
+        stations: st.clone(),
+    }
+    .spec()
+    .unwrap();
     let mut bounds: Vec<[f32; 2]> = PAPER_BOUNDS
         .iter()
         .map(|b| [b[0] as f32, b[1] as f32])
         .collect();
     for e in &effects {
         bounds.extend(
-            magic_train::pipeline::effect_bounds(e)
+            magic_train::gnss::effect_bounds(e)
                 .iter()
                 .map(|b| [b[0] as f32, b[1] as f32]),
         );

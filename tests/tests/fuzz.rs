@@ -24,7 +24,7 @@ use magic_core::line::parse_obs;
 use magic_core::model_file::{Model, MAGIC, VERSION};
 use magic_core::{invert, Variant, Workspace};
 use magic_tests::random_mogi_model;
-use magic_train::synth;
+use magic_train::gnss::synth;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, OnceLock};
@@ -242,7 +242,12 @@ struct Models {
 fn models() -> &'static Models {
     static M: OnceLock<Models> = OnceLock::new();
     M.get_or_init(|| {
-        let calib = synth::generate(synth::Scenario::Clean, 5).data.train.x[..200].to_vec();
+        let calib = synth::generate(synth::Scenario::Clean, 5)
+            .problem
+            .data
+            .train
+            .x[..200]
+            .to_vec();
         let c = random_mogi_model(Variant::C, 5);
         let files = vec![
             c.quantize_int8(&calib).unwrap().encode().unwrap(),

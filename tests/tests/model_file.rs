@@ -4,11 +4,16 @@
 use magic_core::model_file::{Problem, VERSION};
 use magic_core::{invert, Error, Model, Variant, Workspace};
 use magic_tests::random_mogi_model;
-use magic_train::synth;
+use magic_train::gnss::synth;
 
 fn int8_bytes() -> Vec<u8> {
     let m = random_mogi_model(Variant::C, 5);
-    let calib = synth::generate(synth::Scenario::Clean, 5).data.train.x[..200].to_vec();
+    let calib = synth::generate(synth::Scenario::Clean, 5)
+        .problem
+        .data
+        .train
+        .x[..200]
+        .to_vec();
     m.quantize_int8(&calib).unwrap().encode().unwrap()
 }
 

@@ -4,12 +4,14 @@
 
 use magic_core::mogi::{field, field_jacobian, Station};
 use magic_tests::shared_data;
-use magic_train::data::gnss::GnssData;
 use magic_train::data::table::Table;
+use magic_train::GnssProblem;
 
 fn load() -> (Vec<Station>, Vec<[f64; 4]>, Vec<Vec<f64>>) {
     let dir = shared_data();
-    let g = GnssData::read(&dir.join("gnss")).expect("gnss data");
+    let g = GnssProblem::read(&dir.join("gnss"))
+        .expect("gnss data")
+        .network;
     let t = Table::read(&dir.join("oracle/mogi_oracle_1k.csv"), b',').expect("oracle");
     let pc: Vec<usize> = ["xcen_km", "ycen_km", "d_km", "dV_1e6m3"]
         .iter()

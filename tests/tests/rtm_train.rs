@@ -8,11 +8,10 @@
 use magic_core::model_file::{Model, Problem};
 use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
 use magic_core::{invert, Error, Variant, Workspace};
-use magic_train::data::rtm_tables::{RtmTables, S2_DATA_BANDS};
-use magic_train::data::s2::S2Data;
-use magic_train::rtm_pipeline::{train_rtm, RtmSetup, RtmVariant};
-use magic_train::train::TrainConfig;
-use magic_train::OwnedModel;
+use magic_train::rtm::{RtmTables, S2_DATA_BANDS};
+use magic_train::{
+    train_model, Dataset, ModelKind, OwnedEffect, OwnedModel, Problem as _, RtmProblem, TrainConfig,
+};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
@@ -32,11 +31,11 @@ fn data_dir() -> Option<PathBuf> {
     }
 }
 
-fn setup() -> Option<&'static RtmSetup> {
-    static S: OnceLock<Option<RtmSetup>> = OnceLock::new();
+fn setup() -> Option<&'static RtmProblem> {
+    static S: OnceLock<Option<RtmProblem>> = OnceLock::new();
     S.get_or_init(|| {
         let d = data_dir()?;
-        Some(RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap())
+        Some(RtmProblem::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap())
     })
     .as_ref()
 }
@@ -51,9 +50,10 @@ fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
             progress: false,
             ..TrainConfig::s2()
         };
-        let valid = s.data.valid.head(200);
-        let (model, log) =
-            train_rtm(s, &s.data.train.head(300), &valid, RtmVariant::B, &cfg, 7).unwrap();
+        let mut small = s.clone();
+        small.data.train = s.data.train.head(300);
+        small.data.valid = s.data.valid.head(200);
+        let (model, log) = train_model(&small, ModelKind::B, &[], &cfg, 7).unwrap();
         assert_eq!(log.epochs, 2);
         assert!(
             log.best_valid.is_finite() && log.best_valid < 5.0,
@@ -66,11 +66,8 @@ fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
     .as_ref()
 }
 
-fn physical(data: &S2Data, row: &[f32]) -> Vec<f32> {
-    row.iter()
-        .enumerate()
-        .map(|(c, v)| (*v as f64 * data.scale[c] + data.mean[c]) as f32)
-        .collect()
+fn physical(data: &Dataset, row: &[f32]) -> Vec<f32> {
+    data.physical_row(row)
 }
 
 #[test]
@@ -89,7 +86,7 @@ fn short_training_run_of_b_gives_a_valid_small_model() {
     assert_eq!(m.n_params(), N_LEARNED);
     let s = setup().unwrap();
     let mut ws = Workspace::default();
-    for row in s.data.test.rows.x.iter().take(50) {
+    for row in s.data.test.x.iter().take(50) {
         let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
         // 7 learned variables, then cd and h.
         assert_eq!(inv.n_params, N_LEARNED + 2);
@@ -119,7 +116,7 @@ fn model_file_round_trip_matches_the_f64_tables() {
     assert_eq!(&OwnedModel::from_model(&m).encode().unwrap(), bytes);
     let mut ws = Workspace::default();
     let mut worst = 0f64;
-    for row in s.data.test.rows.x.iter().step_by(37).take(100) {
+    for row in s.data.test.x.iter().step_by(37).take(100) {
         let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
         let z: [f64; N_LEARNED] = inv.params[..N_LEARNED].try_into().unwrap();
         let y = full
@@ -131,7 +128,7 @@ fn model_file_round_trip_matches_the_f64_tables() {
     }
     assert!(worst < 1e-4, "f32 table rows vs f64 tables: {worst}");
     // f32 physics on the board's path agrees too.
-    let row = physical(&s.data, &s.data.test.rows.x[0]);
+    let row = physical(&s.data, &s.data.test.x[0]);
     let a = invert::<f64>(&m, &row, &mut ws).unwrap();
     let b = invert::<f32>(&m, &row, &mut ws).unwrap();
     for k in 0..11 {
@@ -233,12 +230,12 @@ fn corrupt_and_inconsistent_rtm_files_are_errors() {
     assert!(!e.is_empty());
     // GNSS effects are not RTM effects; illumination needs the physical geometry (this model is
     // in the reference geometry).
-    let e = with(&|o| o.effects.push(magic_train::export::OwnedEffect::CommonMode));
+    let e = with(&|o| o.effects.push(OwnedEffect::CommonMode));
     assert!(
         e.contains("only the illumination and band-offset effects"),
         "{e}"
     );
-    let e = with(&|o| o.effects.push(magic_train::rtm_pipeline::s2_illumination()));
+    let e = with(&|o| o.effects.push(setup().unwrap().illumination()));
     assert!(e.contains("physical geometry"), "{e}");
 }
 
@@ -252,7 +249,16 @@ fn forward_rtm_command_matches_the_oracle() {
     std::fs::create_dir_all(&dir).unwrap();
     let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
     std::fs::write(&input, &head).unwrap();
-    magic_train::rtm_cli::forward(&input, &output, Some(&d.join("rtm")), "reference").unwrap();
+    let status = std::process::Command::new(magic_tests::magic_bin())
+        .args(["forward", "rtm", "--geometry", "reference", "--input"])
+        .arg(&input)
+        .arg("--output")
+        .arg(&output)
+        .arg("--tables")
+        .arg(d.join("rtm"))
+        .status()
+        .unwrap();
+    assert!(status.success());
     let want = csv::Reader::from_path(&input)
         .unwrap()
         .into_records()
@@ -290,7 +296,7 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
     let Some((_, bytes)) = trained_b() else {
         return;
     };
-    if let Err(e) = magic_train::qemu::ensure_toolchain() {
+    if let Err(e) = magic_train::firmware::qemu::ensure_toolchain() {
         eprintln!("notice: no firmware toolchain ({e}); skipping");
         return;
     }
@@ -299,11 +305,10 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rtm_b.magic");
     std::fs::write(&path, bytes).unwrap();
-    let elf = magic_train::qemu::build_firmware(&path).unwrap();
+    let elf = magic_train::firmware::qemu::build_firmware(&path).unwrap();
     let rows: Vec<Vec<f32>> = s
         .data
         .test
-        .rows
         .x
         .iter()
         .take(8)
@@ -319,7 +324,7 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
                 + "\n"
         })
         .collect();
-    let run = magic_train::qemu::run_firmware(&elf, &input, 300).unwrap();
+    let run = magic_train::firmware::qemu::run_firmware(&elf, &input, 300).unwrap();
     assert!(run.success, "firmware failed: {}", run.stderr);
     assert_eq!(run.results.len(), rows.len());
     let m = Model::decode(bytes).unwrap();
@@ -362,10 +367,10 @@ fn released_c_weights_reproduce_the_paper_through_our_forward_model() {
     let w = data_dir()
         .unwrap()
         .join("oracle/pretrained_rtm_c_weights.json");
-    let model = magic_train::rtm_pipeline::released_c(s, &w).unwrap();
+    let model = magic_train::rtm::released::released_c(s, &w).unwrap();
     let bytes = model.encode().unwrap();
     let m = Model::decode(&bytes).unwrap();
-    let r = magic_train::rtm_pipeline::evaluate_par(&m, &s.data.test.rows, "test").unwrap();
+    let r = magic_train::evaluate(&m, &s.data.test, "test").unwrap();
     let p = r.physics_mse.unwrap();
     eprintln!(
         "released C through our F: test MSE {:.4}, physics-only {p:.4}",
@@ -389,20 +394,21 @@ fn s2_reader_reports_bad_cells_by_file_line_and_column() {
     write("train.csv", &split(&[good, good]));
     write("valid.csv", &split(&[good]));
     write("test.csv", &split(&[good]));
-    let d = S2Data::read(&dir).unwrap();
-    assert_eq!((d.train.len(), d.n_obs(), d.train.sample_id[1]), (2, 11, 3));
+    let read = magic_train::rtm::data::read_dir;
+    let d = read(&dir).unwrap();
+    assert_eq!((d.train.len(), d.n_obs(), d.train.ids[1]), (2, 11, 3));
     assert_eq!(d.columns[7], "B8A_NIR2");
     write("train.csv", &split(&[good, &good.replacen("0.2", "x", 1)]));
-    let e = S2Data::read(&dir).unwrap_err().to_string();
+    let e = read(&dir).unwrap_err().to_string();
     assert!(
         e.contains("train.csv:3:2") && e.contains("B03_GREEN"),
         "{e}"
     );
     write("train.csv", &split(&[&good.replace("2018.07.02", "July")]));
-    let e = S2Data::read(&dir).unwrap_err().to_string();
+    let e = read(&dir).unwrap_err().to_string();
     assert!(e.contains("train.csv:2:14") && e.contains("date"), "{e}");
     write("train.csv", &split(&[good]).replace("B09_WV", "B10"));
-    let e = S2Data::read(&dir).unwrap_err().to_string();
+    let e = read(&dir).unwrap_err().to_string();
     assert!(e.contains("B09"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -414,32 +420,27 @@ fn s2_reader_reports_bad_cells_by_file_line_and_column() {
 /// effect declared, the family is no longer a candidate (its pattern is zero).
 #[test]
 fn undeclared_illumination_is_found_in_synthetic_spectra() {
-    use magic_train::rtm_pipeline::s2_illumination;
-    use magic_train::rtm_residuals::{analyse_rtm, RtmAnalysisOptions};
+    use magic_train::{analyse, AnalysisOptions};
     use rand::{Rng, SeedableRng};
     let Some(d) = data_dir() else {
         return;
     };
-    let mut setup = RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Physical).unwrap();
-    let truth = setup
-        .physics()
-        .unwrap()
-        .with_effects(vec![s2_illumination()])
-        .unwrap();
+    let mut setup = RtmProblem::read(&d.join("s2"), &d.join("rtm"), Geometry::Physical).unwrap();
+    let truth = setup.physics(&[setup.illumination()]).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let bounds = magic_core::rtm::LEARNED_BOUNDS;
     let data = setup.data.clone();
-    let mut synth = |split: &magic_train::data::s2::S2Split, n: usize| {
+    let mut synth = |split: &magic_train::Split, n: usize| {
         let mut s = split.head(n);
-        let days = s.rows.days();
-        for (row, t) in s.rows.x.iter_mut().zip(&days) {
+        let days = s.days();
+        for (row, t) in s.x.iter_mut().zip(&days) {
             // Variables in the middle 80 % of their ranges.
             let z: Vec<f64> = bounds
                 .iter()
                 .map(|b| b[0] + (b[1] - b[0]) * (0.1 + 0.8 * rng.random::<f64>()))
                 .collect();
             let mut y = vec![0.0; row.len()];
-            magic_train::physics::Physics::forward(&truth, &z, *t, &mut y).unwrap();
+            truth.forward(&z, *t, &mut y).unwrap();
             for (c, v) in row.iter_mut().enumerate() {
                 let noise = 0.002 * (rng.random::<f64>() - 0.5);
                 *v = ((y[c] + noise - data.mean[c]) / data.scale[c]) as f32;
@@ -455,12 +456,11 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
         progress: false,
         ..TrainConfig::s2()
     };
-    let s = &setup.data;
-    let (b0, _) = train_rtm(&setup, &s.train, &s.valid, RtmVariant::B, &cfg, 3).unwrap();
+    let (b0, _) = train_model(&setup, ModelKind::B, &[], &cfg, 3).unwrap();
     let bytes0 = b0.encode().unwrap();
     let m0 = Model::decode(&bytes0).unwrap();
-    let opts = RtmAnalysisOptions::default();
-    let a0 = analyse_rtm(&m0, &setup.data, &opts).unwrap();
+    let opts = AnalysisOptions::default();
+    let (a0, _) = analyse(&setup, &m0, &opts).unwrap();
     eprintln!("fixed sun:\n{}", a0.table());
     let top = &a0.effects[0];
     assert_eq!(top.family, "illumination", "{}", a0.table());
@@ -471,12 +471,11 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
         a0.table()
     );
 
-    setup.effects = vec![s2_illumination()];
-    let (b1, _) = train_rtm(&setup, &s.train, &s.valid, RtmVariant::B, &cfg, 3).unwrap();
+    let (b1, _) = train_model(&setup, ModelKind::B, &[setup.illumination()], &cfg, 3).unwrap();
     let bytes1 = b1.encode().unwrap();
     let m1 = Model::decode(&bytes1).unwrap();
     assert!(m1.needs_time());
-    let a1 = analyse_rtm(&m1, &setup.data, &opts).unwrap();
+    let (a1, _) = analyse(&setup, &m1, &opts).unwrap();
     eprintln!("true sun:\n{}", a1.table());
     // (B's error with the true sun is not asserted: the encoder does not see the date, so it
     // cannot undo a date-dependent sun exactly, and after a few epochs it is still far from
@@ -497,7 +496,7 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     let Some((model, _)) = trained_b() else {
         return;
     };
-    if let Err(e) = magic_train::qemu::ensure_toolchain() {
+    if let Err(e) = magic_train::firmware::qemu::ensure_toolchain() {
         eprintln!("notice: no firmware toolchain ({e}); skipping");
         return;
     }
@@ -506,8 +505,8 @@ fn rtm_illumination_model_runs_on_the_firmware() {
         *geometry = Geometry::Physical;
     }
     m.effects = vec![
-        magic_train::rtm_pipeline::s2_illumination(),
-        magic_train::export::OwnedEffect::BandOffset {
+        setup().unwrap().illumination(),
+        OwnedEffect::BandOffset {
             offset: (0..11).map(|b| 0.002 * b as f32 - 0.01).collect(),
         },
     ];
@@ -529,14 +528,14 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rtm_ill.magic");
     std::fs::write(&path, &bytes).unwrap();
-    let elf = magic_train::qemu::build_firmware(&path).unwrap();
+    let elf = magic_train::firmware::qemu::build_firmware(&path).unwrap();
     let test = &s.data.test;
     let idx: Vec<usize> = (0..test.len()).step_by(test.len() / 6).take(6).collect();
     let lines: Vec<String> = idx
         .iter()
         .map(|&i| {
-            let date = test.rows.dates[i].replace('.', "-");
-            let vals: Vec<String> = physical(&s.data, &test.rows.x[i])
+            let date = test.dates[i].replace('.', "-");
+            let vals: Vec<String> = physical(&s.data, &test.x[i])
                 .iter()
                 .map(|v| format!("{v}"))
                 .collect();
@@ -544,7 +543,7 @@ fn rtm_illumination_model_runs_on_the_firmware() {
         })
         .collect();
     let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
-    let run = magic_train::qemu::run_firmware(&elf, &input, 300).unwrap();
+    let run = magic_train::firmware::qemu::run_firmware(&elf, &input, 300).unwrap();
     assert!(run.success, "firmware failed: {}", run.stderr);
     assert_eq!(run.results.len(), lines.len());
     let mut ws = Workspace::default();

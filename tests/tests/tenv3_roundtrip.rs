@@ -6,8 +6,9 @@
 use magic_core::mogi::{self, Station};
 use magic_core::{invert, Flags, Model, Variant, Workspace};
 use magic_tests::random_mogi_model;
-use magic_train::data::tenv3::{self, Reference};
-use magic_train::{records, synth};
+use magic_train::data::records;
+use magic_train::gnss::synth;
+use magic_train::gnss::tenv3::{self, Reference};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
@@ -39,12 +40,12 @@ impl Drop for TempDir {
 }
 
 fn day0() -> i64 {
-    tenv3::days_from_civil(2010, 7, 20)
+    magic_core::time::days_from_civil(2010, 7, 20)
 }
 
 /// The fields of one tenv3 line (23, or the first 20 for the old layout).
 fn fields(site: &str, day: i64, int: [i64; 3], frac: [f64; 3], sig: [f64; 3]) -> Vec<String> {
-    let (y, m, d) = synth::civil(day);
+    let (y, m, d) = magic_core::time::civil_from_days(day);
     let mjd = day + MJD_1970;
     let mut f = vec![
         site.to_string(),

@@ -1,19 +1,20 @@
 //! Train → export → core: a tiny training run on synthetic data, exported to f32 and int8 model
 //! files, decoded by the core and evaluated through `invert` like the board does.
 
-use magic_core::{Model, Variant};
-use magic_train::pipeline::train_mogi;
-use magic_train::{evaluate, synth, TrainConfig};
+use magic_core::Model;
+use magic_train::gnss::synth;
+use magic_train::{evaluate, train_model, ModelKind, TrainConfig};
 
 #[test]
 fn tiny_training_exports_and_inverts() {
-    let data = synth::generate(synth::Scenario::Clean, 11).data;
+    let p = synth::generate(synth::Scenario::Clean, 11).problem;
+    let data = &p.data;
     let cfg = TrainConfig {
         epochs: 4,
         progress: false,
         ..TrainConfig::gnss()
     };
-    let (model, log) = train_mogi(&data, Variant::C, &cfg, 11).unwrap();
+    let (model, log) = train_model(&p, ModelKind::C, &[], &cfg, 11).unwrap();
     assert_eq!(log.epochs, 4);
     assert!(log
         .history
@@ -50,18 +51,18 @@ fn tiny_training_exports_and_inverts() {
 
 #[test]
 fn seeds_make_runs_repeatable() {
-    let data = synth::generate(synth::Scenario::Clean, 4).data;
+    let p = synth::generate(synth::Scenario::Clean, 4).problem;
     let cfg = TrainConfig {
         epochs: 2,
         progress: false,
         ..TrainConfig::gnss()
     };
-    let a = train_mogi(&data, Variant::B, &cfg, 9)
+    let a = train_model(&p, ModelKind::B, &[], &cfg, 9)
         .unwrap()
         .0
         .encode()
         .unwrap();
-    let b = train_mogi(&data, Variant::B, &cfg, 9)
+    let b = train_model(&p, ModelKind::B, &[], &cfg, 9)
         .unwrap()
         .0
         .encode()

@@ -1,12 +1,13 @@
-//! Data readers: where the data lives, the GNSS splits, the S2 spectra, the INFORM tables, and
-//! numeric CSV tables.
+//! Data in and out, the same for every problem: where the data lives, the dataset type, numeric
+//! CSV tables with located errors, and observation/result rows of `magic invert`.
 
-pub mod gnss;
-pub mod rtm_tables;
-pub mod s2;
+pub mod dataset;
+pub mod records;
 pub mod table;
-pub mod tenv3;
 
+pub use dataset::{day_number, Dataset, Split, SplitName};
+
+use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 
 /// Finds a data folder: the explicit `--data-dir`, else `$MAGIC_DATA/<sub>`, else
@@ -23,4 +24,12 @@ pub fn locate(explicit: Option<&Path>, sub: &str) -> Option<PathBuf> {
     }
     let p = Path::new("..").join("shared").join("data").join(sub);
     p.is_dir().then_some(p)
+}
+
+/// [`locate`], or an error saying how to point at the folder (`what`: "GNSS data", "S2 data",
+/// "RTM tables"; `flag`: the option that names it).
+pub fn require(explicit: Option<&Path>, sub: &str, what: &str, flag: &str) -> Result<PathBuf> {
+    locate(explicit, sub).with_context(|| {
+        format!("no {what}: pass {flag}, set MAGIC_DATA (a folder holding {sub}/), or run next to ../shared/data")
+    })
 }

@@ -12,12 +12,26 @@ pub struct Table {
     pub header: Vec<String>,
     /// Rows with their 1-based line numbers.
     pub rows: Vec<(u64, csv::StringRecord)>,
+    /// Per row, what is wrong with its shape (a field count other than the header's), for
+    /// readers that report a bad row and go on ([`Table::read_lenient`]).
+    pub malformed: Vec<Option<String>>,
 }
 
 impl Table {
     /// Reads a comma- (or `delim`-) separated file with a header line. Every row must have as many
     /// fields as the header.
     pub fn read(path: &Path, delim: u8) -> Result<Table> {
+        let t = Table::read_lenient(path, delim)?;
+        if let Some(msg) = t.malformed.iter().flatten().next() {
+            bail!("{msg}");
+        }
+        Ok(t)
+    }
+
+    /// Reads like [`Table::read`], keeping rows whose field count differs from the header's: each
+    /// such row gets its message (file and line) in [`Table::malformed`]. Errors only when the
+    /// file cannot be read or has no header.
+    pub fn read_lenient(path: &Path, delim: u8) -> Result<Table> {
         let name = path.display().to_string();
         let mut rdr = csv::ReaderBuilder::new()
             .delimiter(delim)
@@ -31,25 +45,34 @@ impl Table {
             .map(|s| s.trim().to_string())
             .collect();
         let mut rows = Vec::new();
-        for rec in rdr.records() {
-            let rec = rec.map_err(|e| {
-                let line = e.position().map_or(0, |p| p.line());
-                anyhow::anyhow!("{name}:{line}: malformed CSV: {e}")
-            })?;
-            let line = rec.position().map_or(0, |p| p.line());
-            if rec.len() != header.len() {
-                bail!(
-                    "{name}:{line}: expected {} fields (as in the header), found {}",
-                    header.len(),
-                    rec.len()
-                );
+        let mut malformed = Vec::new();
+        let mut rec = csv::StringRecord::new();
+        loop {
+            let line = rdr.position().line();
+            match rdr.read_record(&mut rec) {
+                Ok(false) => break,
+                Ok(true) => {
+                    let line = rec.position().map_or(line, |p| p.line());
+                    malformed.push((rec.len() != header.len()).then(|| {
+                        format!(
+                            "{name}:{line}: expected {} fields (as in the header), found {}",
+                            header.len(),
+                            rec.len()
+                        )
+                    }));
+                    rows.push((line, rec.clone()));
+                }
+                Err(e) => {
+                    let line = e.position().map_or(line, |p| p.line());
+                    bail!("{name}:{line}: malformed CSV: {e}");
+                }
             }
-            rows.push((line, rec));
         }
         Ok(Table {
             path: name,
             header,
             rows,
+            malformed,
         })
     }
 

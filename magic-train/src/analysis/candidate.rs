@@ -1,0 +1,119 @@
+//! A candidate effect: one family fitted to the residuals, its held-out score, the chance level
+//! of that score from surrogates, and whether the excess is a discovery.
+//!
+//! **Significance.** A family is significant when its score exceeds the chance level (the
+//! [`AnalysisOptions::quantile`](super::AnalysisOptions::quantile) of the surrogate scores,
+//! floored at zero) by more than its margin: the score must pass the surrogates' mean plus
+//! [`SD_MARGIN`] standard deviations on the square-root scale (where noise scores are close to
+//! Gaussian; the raw scores are χ²-like with a heavy tail), and exceed the chance level by at
+//! least [`MIN_EXCESS`] of the residual variance (negligible effects are not worth a model term).
+
+use crate::model::OwnedEffect;
+use crate::numerics::{quantile, sd};
+use serde_json::json;
+
+/// Smallest excess over chance (share of residual variance) that counts as a discovery.
+pub const MIN_EXCESS: f64 = 0.005;
+/// Standard deviations above the surrogates' mean (square-root scale) a significant score must
+/// reach. Red noise makes chance coherence between a dozen stations heavy-tailed: on clean
+/// synthetic data scores of 3–4 such deviations occur in a few percent of the families.
+pub const SD_MARGIN: f64 = 4.0;
+
+/// One effect family fitted to the residuals.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Candidate {
+    /// Family name (`common_mode`, `seasonal`, …, `illumination`, `band_offset`, `species`).
+    pub family: String,
+    /// Share of the residual variance explained on held-out data.
+    pub variance_explained: f64,
+    /// Share explained by chance (quantile over surrogates, floored at 0).
+    pub chance_level: f64,
+    /// Whether the excess over chance is beyond the margin.
+    pub significant: bool,
+    /// Fitted parameters (for GNSS families, the names of `truth.json` of `magic synth`).
+    pub params: serde_json::Value,
+    /// The effect that adds this family to F (none when it cannot be declared, or is already).
+    pub effect: Option<OwnedEffect>,
+    /// Standard deviation of the surrogate scores.
+    pub chance_sd: f64,
+    /// The margin the excess had to exceed.
+    pub margin: f64,
+    /// The surrogate scores the chance level comes from.
+    pub surrogate_scores: Vec<f64>,
+}
+
+impl Candidate {
+    /// A family's candidate from its held-out score and its surrogates' scores (see the module
+    /// documentation for the rule).
+    pub fn from_scores(
+        family: &str,
+        score: f64,
+        chance: Vec<f64>,
+        quantile_level: f64,
+        params: serde_json::Value,
+        effect: Option<OwnedEffect>,
+    ) -> Candidate {
+        let chance_level = quantile(&chance, quantile_level).max(0.0);
+        let chance_sd = sd(&chance);
+        let roots: Vec<f64> = chance.iter().map(|v| v.max(0.0).sqrt()).collect();
+        let t = roots.iter().sum::<f64>() / roots.len().max(1) as f64 + SD_MARGIN * sd(&roots);
+        let margin = MIN_EXCESS.max(t * t - chance_level);
+        Candidate {
+            family: family.into(),
+            variance_explained: score,
+            chance_level,
+            significant: score - chance_level > margin,
+            params,
+            effect,
+            chance_sd,
+            margin,
+            surrogate_scores: chance,
+        }
+    }
+
+    /// Score minus chance level (the ranking key).
+    pub fn excess(&self) -> f64 {
+        self.variance_explained - self.chance_level
+    }
+
+    /// The candidate as reported (`family`, `variance_explained`, `chance_level`, `significant`,
+    /// `params`, and `excess`, `margin`, `declarable` — whether it can be added to F — and the
+    /// surrogate scores).
+    pub fn to_json(&self) -> serde_json::Value {
+        json!({
+            "family": self.family,
+            "variance_explained": self.variance_explained,
+            "chance_level": self.chance_level,
+            "significant": self.significant,
+            "params": self.params,
+            "excess": self.excess(),
+            "margin": self.margin,
+            "declarable": self.effect.is_some(),
+            "surrogate_scores": self.surrogate_scores,
+        })
+    }
+
+    /// `family (explained vs chance)` with three decimals, as the loop tables print it.
+    pub fn short(&self) -> String {
+        format!(
+            "{} ({:.3} vs {:.3})",
+            self.family, self.variance_explained, self.chance_level
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn significance_needs_the_margin_over_chance() {
+        let noise = vec![0.010, 0.012, 0.008, 0.011, 0.009, 0.010, 0.013, 0.007];
+        let weak = Candidate::from_scores("x", 0.014, noise.clone(), 0.95, json!({}), None);
+        assert!(!weak.significant, "{weak:?}");
+        let strong = Candidate::from_scores("x", 0.2, noise, 0.95, json!({}), None);
+        assert!(strong.significant);
+        assert!(strong.margin >= MIN_EXCESS);
+        assert!((strong.excess() - (0.2 - strong.chance_level)).abs() < 1e-15);
+    }
+}

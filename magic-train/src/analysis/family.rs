@@ -1,0 +1,85 @@
+//! An effect family: a kind of term F may lack (a network translation, a step, an illumination
+//! change, …), typed against its problem's residuals.
+//!
+//! A family fits itself to the residuals and scores the fit on held-out data (the fitted object
+//! carries its score), makes surrogate residuals that keep the noise's structure but not its own
+//! (the fit removed, then randomised) for the chance level, and declares a fit as an [`Effect`]
+//! of the model file where it can. The chance procedure is written once, in [`DynFamily::assess`]
+//! for every family: the same fit-and-score on each surrogate.
+//!
+//! [`Effect`]: magic_core::effects::Effect
+
+use super::{AnalysisOptions, Candidate};
+use crate::model::OwnedEffect;
+use anyhow::Result;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+
+/// An effect family over residuals `R`.
+pub trait Family<R>: Sync {
+    /// A fit of the family to residuals, with its held-out score.
+    type Fit: Send + Sync;
+
+    /// The family's name (reports, `truth.json`, the declared effect's family).
+    fn name(&self) -> &'static str;
+    /// Fits the family to `res` and scores the fit on data the fit did not use.
+    fn fit(&self, res: &R) -> Result<Self::Fit>;
+    /// The share of the residual variance a fit explains on held-out data (≥ 0).
+    fn score(&self, fit: &Self::Fit) -> f64;
+    /// Residuals like `res` without this family's signal: `fit` removed, then randomised so that
+    /// the noise's structure is kept and the family's is not.
+    fn surrogate(&self, res: &R, fit: &Self::Fit, rng: &mut StdRng) -> Result<R>;
+    /// The fit's parameters as reported (JSON).
+    fn params(&self, res: &R, fit: &Self::Fit) -> serde_json::Value;
+    /// The effect that adds the fit to F (`None`: not declarable, or already declared).
+    fn declare(&self, res: &R, fit: &Self::Fit) -> Option<OwnedEffect>;
+}
+
+/// A family behind a trait object: what the analysis and the registries hold.
+pub trait DynFamily<R>: Sync {
+    /// The family's name.
+    fn name(&self) -> &'static str;
+    /// Fits, scores, draws `opts.surrogates` surrogates for the chance level and returns the
+    /// candidate.
+    fn assess(&self, res: &R, opts: &AnalysisOptions) -> Result<Candidate>;
+}
+
+/// Seeds of a family's surrogates: a stream of its own, from the analysis seed and its name, so
+/// that adding or reordering families leaves every other family's chance level unchanged.
+pub fn surrogate_seeds(seed: u64, family: &str, n: usize) -> Vec<u64> {
+    // FNV-1a of the name.
+    let h = family.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ b as u64).wrapping_mul(0x100_0000_01b3)
+    });
+    let mut rng = StdRng::seed_from_u64(seed ^ h);
+    (0..n).map(|_| rng.random()).collect()
+}
+
+impl<R: Sync, F: Family<R>> DynFamily<R> for F {
+    fn name(&self) -> &'static str {
+        Family::name(self)
+    }
+
+    fn assess(&self, res: &R, opts: &AnalysisOptions) -> Result<Candidate> {
+        let fit = self.fit(res)?;
+        let score = self.score(&fit);
+        let seeds = surrogate_seeds(opts.seed, self.name(), opts.surrogates.max(2));
+        let chance = seeds
+            .par_iter()
+            .map(|s| {
+                let mut rng = StdRng::seed_from_u64(*s);
+                let sur = self.surrogate(res, &fit, &mut rng)?;
+                Ok(self.score(&self.fit(&sur)?))
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        Ok(Candidate::from_scores(
+            self.name(),
+            score,
+            chance,
+            opts.quantile,
+            self.params(res, &fit),
+            self.declare(res, &fit),
+        ))
+    }
+}

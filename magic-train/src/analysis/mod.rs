@@ -1,0 +1,194 @@
+//! Residual analysis, for every problem: which declared effect does F lack?
+//!
+//! A model's residuals (what F, with the variables the encoder infers, leaves of each
+//! observation) are computed by the [`Problem`]; each of its effect [`Family`]s is fitted to them,
+//! scored by the share of residual variance it explains on held-out data, and compared with the
+//! same score on surrogates that keep the noise's structure but not the family's
+//! ([`DynFamily::assess`]); the candidates are ranked by their excess over chance
+//! ([`Candidate`]). The loop ([`crate::closed_loop`]) adds the top significant, declarable one to F.
+
+mod candidate;
+mod family;
+pub mod projection;
+pub mod score;
+pub mod surrogate;
+
+pub use candidate::{Candidate, MIN_EXCESS, SD_MARGIN};
+pub use family::{surrogate_seeds, DynFamily, Family};
+
+use crate::data::SplitName;
+use crate::problem::Problem;
+use anyhow::Result;
+use magic_core::{Model, Variant};
+use serde_json::json;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Options of [`analyse`], checked once by the problem's residuals.
+#[derive(Clone, Debug)]
+pub struct AnalysisOptions {
+    /// The split the families are fitted on.
+    pub split: SplitName,
+    /// The splits fitted families are scored on (`None`: the problem's default, see
+    /// [`Problem::default_held`]).
+    pub held: Option<Vec<SplitName>>,
+    /// Surrogates per family for the chance level.
+    pub surrogates: usize,
+    /// Quantile of the surrogate scores taken as the chance level.
+    pub quantile: f64,
+    /// Seed of the surrogates.
+    pub seed: u64,
+}
+
+impl Default for AnalysisOptions {
+    fn default() -> Self {
+        AnalysisOptions {
+            split: SplitName::Train,
+            held: None,
+            surrogates: 20,
+            quantile: 0.95,
+            seed: 0,
+        }
+    }
+}
+
+impl AnalysisOptions {
+    /// The held-out splits for `problem` (never the analysed one).
+    pub fn held_splits<P: Problem + ?Sized>(&self, problem: &P) -> Vec<SplitName> {
+        let h = self
+            .held
+            .clone()
+            .unwrap_or_else(|| problem.default_held(self.split));
+        h.into_iter().filter(|s| *s != self.split).collect()
+    }
+}
+
+/// The result of [`analyse`].
+#[derive(Clone, Debug)]
+pub struct Analysis {
+    /// The problem's name.
+    pub problem: &'static str,
+    /// Analysed split.
+    pub split: SplitName,
+    /// Held-out splits.
+    pub held: Vec<SplitName>,
+    /// Candidates ranked by excess over chance, descending.
+    pub effects: Vec<Candidate>,
+    /// What the problem reports about the residuals themselves.
+    pub residuals: serde_json::Value,
+    /// One line summing the residuals up.
+    pub summary: String,
+    /// Seconds the analysis took.
+    pub seconds: f64,
+}
+
+impl Analysis {
+    /// The most significant candidate that can be added to F and whose family F does not
+    /// declare yet.
+    pub fn top_declarable(&self, declared: &[&str]) -> Option<&Candidate> {
+        self.effects
+            .iter()
+            .find(|c| c.significant && c.effect.is_some() && !declared.contains(&c.family.as_str()))
+    }
+
+    /// The JSON report (`{"effects": [{"family", "variance_explained", "chance_level",
+    /// "significant", "params", …}, …], "residuals": {…}, …}`).
+    pub fn to_json(&self) -> serde_json::Value {
+        json!({
+            "problem": self.problem,
+            "split": self.split,
+            "held": self.held,
+            "effects": self.effects.iter().map(Candidate::to_json).collect::<Vec<_>>(),
+            "residuals": self.residuals,
+            "seconds": self.seconds,
+        })
+    }
+
+    /// A text table of the candidates.
+    pub fn table(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(s, "{}", self.summary);
+        let _ = writeln!(
+            s,
+            "{:<14} {:>10} {:>10} {:>10} {:>8}  params",
+            "family", "explained", "chance", "excess", "signif."
+        );
+        for c in &self.effects {
+            let _ = writeln!(
+                s,
+                "{:<14} {:>9.2}% {:>9.2}% {:>9.2}% {:>8}  {}",
+                c.family,
+                100.0 * c.variance_explained,
+                100.0 * c.chance_level,
+                100.0 * c.excess(),
+                if c.significant { "yes" } else { "no" },
+                compact(&c.params)
+            );
+        }
+        s
+    }
+}
+
+/// At most 160 characters of a JSON value.
+fn compact(v: &serde_json::Value) -> String {
+    let s = v.to_string();
+    if s.chars().count() > 160 {
+        format!("{}…", s.chars().take(157).collect::<String>())
+    } else {
+        s
+    }
+}
+
+/// Fits every family of `problem` to the residuals of `model` and ranks them by their excess
+/// over chance; returns the residuals too (for the problem's figures).
+pub fn analyse<P: Problem + ?Sized>(
+    problem: &P,
+    model: &Model<'_>,
+    opts: &AnalysisOptions,
+) -> Result<(Analysis, P::Residuals)> {
+    let start = std::time::Instant::now();
+    if model.variant == Variant::A {
+        anyhow::bail!("residual analysis needs a model with physics (variant B or C), not A");
+    }
+    let res = problem.residuals(model, opts)?;
+    let mut effects = problem
+        .families()
+        .iter()
+        .map(|f| f.assess(&res, opts))
+        .collect::<Result<Vec<_>>>()?;
+    effects.sort_by(|a, b| b.excess().total_cmp(&a.excess()));
+    let (residuals, summary) = problem.describe_residuals(&res);
+    Ok((
+        Analysis {
+            problem: problem.name(),
+            split: opts.split,
+            held: opts.held_splits(problem),
+            effects,
+            residuals,
+            summary,
+            seconds: start.elapsed().as_secs_f64(),
+        },
+        res,
+    ))
+}
+
+/// A bar per candidate: the share explained (%), a tick at its chance level, `*` when
+/// significant.
+pub fn effects_chart(path: &Path, title: &str, effects: &[Candidate]) -> Result<()> {
+    let labels: Vec<String> = effects
+        .iter()
+        .map(|c| {
+            if c.significant {
+                format!("{} *", c.family)
+            } else {
+                c.family.clone()
+            }
+        })
+        .collect();
+    let values: Vec<f64> = effects
+        .iter()
+        .map(|c| 100.0 * c.variance_explained)
+        .collect();
+    let chance: Vec<f64> = effects.iter().map(|c| 100.0 * c.chance_level).collect();
+    crate::report::plots::bar_chart(path, title, &labels, &values, &chance)
+}

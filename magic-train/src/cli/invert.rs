@@ -1,0 +1,81 @@
+//! `magic invert` (on the host, physics in f64) and `magic qemu` (the same rows on the firmware
+//! under QEMU): observation rows in, one result row out per input row.
+
+use super::args::{decode, read_model};
+use crate::data::records::{self, ObsRow};
+use anyhow::{bail, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+/// The rows to invert and where the results go.
+#[derive(Args, Clone, Debug)]
+pub struct RowsArgs {
+    /// Model file.
+    #[arg(long)]
+    model: PathBuf,
+    /// Observation CSV: columns `ux_<STA>` … in mm (volcano) or the bands `B02` … as reflectance
+    /// (forest), optionally a `date`; other columns are ignored.
+    #[arg(long)]
+    input: PathBuf,
+    /// Result CSV.
+    #[arg(long)]
+    output: PathBuf,
+    /// The input holds standardised values (the data files as they are).
+    #[arg(long)]
+    standardized: bool,
+}
+
+fn report_row_errors(rows: &[ObsRow]) {
+    for r in rows {
+        if let Err(e) = &r.obs {
+            eprintln!("error: {e}");
+        }
+    }
+}
+
+/// Runs `magic invert`.
+pub fn invert(a: &RowsArgs) -> Result<()> {
+    let bytes = read_model(&a.model)?;
+    let m = decode(&a.model, &bytes)?;
+    let rows = records::read_obs(&a.input, &m, a.standardized)?;
+    let lines = records::invert_rows(&m, &rows);
+    report_row_errors(&rows);
+    records::write_results(&a.output, &m, &rows, &lines)?;
+    let bad = lines.iter().filter(|l| l.starts_with("error,")).count();
+    eprintln!(
+        "inverted {} rows ({} errors) -> {}",
+        lines.len(),
+        bad,
+        a.output.display()
+    );
+    if bad > 0 {
+        bail!(
+            "{bad} of {} rows could not be inverted (error rows written)",
+            lines.len()
+        );
+    }
+    Ok(())
+}
+
+/// Runs `magic qemu`.
+pub fn qemu(a: &RowsArgs) -> Result<()> {
+    let bytes = read_model(&a.model)?;
+    let m = decode(&a.model, &bytes)?;
+    let rows = records::read_obs(&a.input, &m, a.standardized)?;
+    report_row_errors(&rows);
+    let run = crate::firmware::run_rows(&a.model, &m, &rows)?;
+    records::write_results(&a.output, &m, &rows, &run.results)?;
+    for (k, v) in &run.costs {
+        eprintln!("# {k} = {v}");
+    }
+    let host = records::invert_rows(&m, &rows);
+    let (worst, mismatched) = crate::firmware::agreement(&m, &run.results, &host);
+    eprintln!(
+        "{} rows -> {}; largest difference from the host: {:.1e} of a variable's range; {} rows failed on one side only",
+        rows.len(),
+        a.output.display(),
+        worst.iter().copied().fold(0.0, f64::max),
+        mismatched
+    );
+    Ok(())
+}

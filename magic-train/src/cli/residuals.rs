@@ -1,0 +1,63 @@
+//! `magic residuals`: fit each effect family to the residuals of a model and rank the families
+//! by the share of residual variance they explain on held-out data beyond chance.
+
+use super::args::{decode, DataArgs, JsonOut, ModelArg};
+use crate::analysis::{analyse, AnalysisOptions};
+use crate::data::SplitName;
+use crate::problem::Problem;
+use crate::with_problem;
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+
+/// `magic residuals`.
+#[derive(Args, Clone, Debug)]
+pub struct ResidualsCmd {
+    #[command(flatten)]
+    model: ModelArg,
+    #[command(flatten)]
+    data: DataArgs,
+    /// The split the families are fitted on.
+    #[arg(long, value_enum, default_value = "train")]
+    split: SplitName,
+    /// The splits fitted families are scored on, comma-separated (default: the volcano's other
+    /// splits; the forest's next split, train → valid, valid → test).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    held: Vec<SplitName>,
+    /// Surrogates per family for the chance level.
+    #[arg(long, default_value_t = 20)]
+    surrogates: usize,
+    /// Seed of the surrogates.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    #[command(flatten)]
+    json: JsonOut,
+    /// Write the analysis' figures (PNG) into this folder.
+    #[arg(long)]
+    plots: Option<PathBuf>,
+}
+
+/// Runs `magic residuals`.
+pub fn run(a: &ResidualsCmd) -> Result<()> {
+    let bytes = a.model.read()?;
+    let m = decode(&a.model.model, &bytes)?;
+    let opts = AnalysisOptions {
+        split: a.split,
+        held: (!a.held.is_empty()).then(|| a.held.clone()),
+        surrogates: a.surrogates,
+        seed: a.seed,
+        ..AnalysisOptions::default()
+    };
+    let p = a.data.problem_of(&m)?;
+    with_problem!(&p, |p| {
+        let (an, res) = analyse(p, &m, &opts)?;
+        print!("{}", an.table());
+        eprintln!("analysis took {:.2} s", an.seconds);
+        a.json.write(&an.to_json())?;
+        if let Some(d) = &a.plots {
+            p.analysis_plots(&res, &an, d)?;
+            eprintln!("plots -> {}", d.display());
+        }
+    });
+    Ok(())
+}

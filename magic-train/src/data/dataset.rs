@@ -1,0 +1,238 @@
+//! The one dataset type every problem trains on: three splits of standardised observations with
+//! their dates (and, where the data has them, a label and a site id per row), the channel names
+//! and the standardisation.
+
+use anyhow::{bail, Result};
+
+/// Which split.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SplitName {
+    /// The training split.
+    Train,
+    /// The validation split (early stopping, thresholds).
+    Valid,
+    /// The test split.
+    Test,
+}
+
+impl SplitName {
+    /// The three splits in the order of the paper's tables.
+    pub const ALL: [SplitName; 3] = [SplitName::Train, SplitName::Valid, SplitName::Test];
+
+    /// `train`, `valid` or `test`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SplitName::Train => "train",
+            SplitName::Valid => "valid",
+            SplitName::Test => "test",
+        }
+    }
+
+    /// Index in [`SplitName::ALL`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+impl std::str::FromStr for SplitName {
+    type Err = anyhow::Error;
+    fn from_str(s: &str) -> Result<SplitName> {
+        match s {
+            "train" => Ok(SplitName::Train),
+            "valid" => Ok(SplitName::Valid),
+            "test" => Ok(SplitName::Test),
+            _ => bail!("unknown split `{s}` (expected train, valid or test)"),
+        }
+    }
+}
+
+impl std::fmt::Display for SplitName {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Day number (days since 1970-01-01) of a date as written in the data files (`YYYY.MM.DD` or
+/// `YYYY-MM-DD`); NaN if malformed.
+pub fn day_number(date: &str) -> f64 {
+    magic_core::time::parse_date(date).map_or(f64::NAN, |d| d as f64)
+}
+
+/// One split: standardised observations, their dates, and optional per-row labels and ids.
+#[derive(Clone, Debug, Default)]
+pub struct Split {
+    /// Rows of standardised values, one per channel.
+    pub x: Vec<Vec<f32>>,
+    /// Dates as written in the file (empty where the file has none).
+    pub dates: Vec<String>,
+    /// A label per row (the species of a forest spectrum), or empty.
+    pub labels: Vec<String>,
+    /// An id per row (the site of a forest spectrum), or empty.
+    pub ids: Vec<u64>,
+}
+
+impl Split {
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    /// Whether empty.
+    pub fn is_empty(&self) -> bool {
+        self.x.is_empty()
+    }
+
+    /// Day numbers of the rows (NaN where the date is missing or malformed).
+    pub fn days(&self) -> Vec<f64> {
+        self.dates.iter().map(|d| day_number(d)).collect()
+    }
+
+    /// Rows `lo..hi` (clamped to the split).
+    pub fn rows(&self, lo: usize, hi: usize) -> Split {
+        let hi = hi.min(self.len());
+        let lo = lo.min(hi);
+        let part = |v: &[String]| {
+            if v.is_empty() {
+                vec![]
+            } else {
+                v[lo..hi].to_vec()
+            }
+        };
+        Split {
+            x: self.x[lo..hi].to_vec(),
+            dates: part(&self.dates),
+            labels: part(&self.labels),
+            ids: if self.ids.is_empty() {
+                vec![]
+            } else {
+                self.ids[lo..hi].to_vec()
+            },
+        }
+    }
+
+    /// The first `n` rows (all if fewer).
+    pub fn head(&self, n: usize) -> Split {
+        self.rows(0, n)
+    }
+}
+
+/// A dataset: channel names, standardisation and the three splits.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    /// Channel (or band) column names, in channel order.
+    pub columns: Vec<String>,
+    /// Channel mean (physical units: mm, reflectance).
+    pub mean: Vec<f64>,
+    /// Channel scale (physical units).
+    pub scale: Vec<f64>,
+    /// Training split.
+    pub train: Split,
+    /// Validation split.
+    pub valid: Split,
+    /// Test split.
+    pub test: Split,
+    /// Where it came from (a folder, or a description of a synthetic set).
+    pub source: String,
+}
+
+impl Dataset {
+    /// Number of channels.
+    pub fn n_obs(&self) -> usize {
+        self.mean.len()
+    }
+
+    /// A split by name.
+    pub fn split(&self, name: SplitName) -> &Split {
+        match name {
+            SplitName::Train => &self.train,
+            SplitName::Valid => &self.valid,
+            SplitName::Test => &self.test,
+        }
+    }
+
+    /// Physical value of standardised channel `c`.
+    pub fn to_physical(&self, c: usize, v: f64) -> f64 {
+        v * self.scale[c] + self.mean[c]
+    }
+
+    /// A standardised row in physical units (f32, as `magic invert` reads them).
+    pub fn physical_row(&self, row: &[f32]) -> Vec<f32> {
+        row.iter()
+            .enumerate()
+            .map(|(c, v)| self.to_physical(c, *v as f64) as f32)
+            .collect()
+    }
+
+    /// Checks the standardisation: one mean and one positive scale per channel.
+    pub fn check(&self) -> Result<()> {
+        let n = self.columns.len();
+        if self.mean.len() != n || self.scale.len() != n {
+            bail!(
+                "{}: mean/scale must hold {n} values, one per channel (found {} and {})",
+                self.source,
+                self.mean.len(),
+                self.scale.len()
+            );
+        }
+        if let Some(i) = self.scale.iter().position(|s| !s.is_finite() || *s <= 0.0) {
+            bail!(
+                "{}: the scale of channel {} (`{}`) must be positive",
+                self.source,
+                i + 1,
+                self.columns[i]
+            );
+        }
+        for name in SplitName::ALL {
+            if let Some((i, r)) = self
+                .split(name)
+                .x
+                .iter()
+                .enumerate()
+                .find(|(_, r)| r.len() != n)
+            {
+                bail!(
+                    "{}: {name} row {} has {} values for {n} channels",
+                    self.source,
+                    i + 1,
+                    r.len()
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_names_round_trip() {
+        for s in SplitName::ALL {
+            assert_eq!(s.as_str().parse::<SplitName>().unwrap(), s);
+            assert_eq!(SplitName::ALL[s.index()], s);
+        }
+        assert!("tests".parse::<SplitName>().is_err());
+    }
+
+    #[test]
+    fn rows_keep_labels_and_ids_aligned() {
+        let s = Split {
+            x: vec![vec![1.0], vec![2.0], vec![3.0]],
+            dates: vec![
+                "2018.04.01".into(),
+                "2018.04.02".into(),
+                "2018.04.03".into(),
+            ],
+            labels: vec!["a".into(), "b".into(), "c".into()],
+            ids: vec![7, 8, 9],
+        };
+        let p = s.rows(1, 10);
+        assert_eq!(p.x, vec![vec![2.0], vec![3.0]]);
+        assert_eq!(p.labels, vec!["b", "c"]);
+        assert_eq!(p.ids, vec![8, 9]);
+        assert_eq!(p.days()[0], day_number("2018-04-02"));
+        assert!(s.head(0).is_empty());
+    }
+}

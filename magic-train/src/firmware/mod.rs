@@ -1,0 +1,8 @@
+//! The firmware from the host: build the Cortex-M4F image with a model embedded, run it under
+//! QEMU with observation lines, and compare its results and cost figures with the host's.
+
+pub mod qemu;
+pub mod run;
+
+pub use qemu::{build_firmware, run_firmware, FirmwareRun};
+pub use run::{agreement, run_rows, run_test_days};

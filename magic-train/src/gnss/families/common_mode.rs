@@ -1,0 +1,72 @@
+//! `common_mode`: a daily translation of the whole network (E, N, U), the same at every station —
+//! reference-frame and atmospheric-loading errors shared by a small network. Latent: declared, it
+//! adds three variables the encoder infers every day.
+
+use super::latent::{self, round3, LatentFit};
+use crate::analysis::Family;
+use crate::gnss::GnssResiduals;
+use crate::model::OwnedEffect;
+use anyhow::Result;
+use rand::rngs::StdRng;
+use serde_json::json;
+
+/// The network translation family.
+pub struct CommonMode;
+
+/// Common-mode patterns: one per component, 1 mm on every station of it (standardised units,
+/// projected off F's Jacobian like every latent pattern).
+pub fn patterns(res: &GnssResiduals) -> Vec<Vec<f64>> {
+    let (ns, nc) = (res.ns(), res.nc());
+    (0..nc / ns)
+        .map(|k| {
+            res.project(
+                &(0..nc)
+                    .map(|c| {
+                        if c / ns == k {
+                            1.0 / res.ctx.scale[c]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect()
+}
+
+impl Family<GnssResiduals> for CommonMode {
+    type Fit = LatentFit;
+
+    fn name(&self) -> &'static str {
+        "common_mode"
+    }
+    fn fit(&self, res: &GnssResiduals) -> Result<LatentFit> {
+        Ok(latent::best_window(res, &patterns(res)))
+    }
+    fn score(&self, fit: &LatentFit) -> f64 {
+        fit.score
+    }
+    fn surrogate(
+        &self,
+        res: &GnssResiduals,
+        _: &LatentFit,
+        rng: &mut StdRng,
+    ) -> Result<GnssResiduals> {
+        Ok(latent::surrogate(res, &patterns(res), rng))
+    }
+    /// The RMS (mm) of the persistent part of each component's daily network mean.
+    fn params(&self, res: &GnssResiduals, fit: &LatentFit) -> serde_json::Value {
+        let rms: Vec<f64> = patterns(res)
+            .iter()
+            .map(|g| {
+                // g is 1/scale on the component: the amplitude is the weighted network mean in mm.
+                let a = latent::daily_amplitude(&res.fit.r, res.nc(), g);
+                round3(latent::persistent_var(&a).max(0.0).sqrt())
+            })
+            .collect();
+        json!({"rms_mm": rms, "neighbour_days": fit.window})
+    }
+    fn declare(&self, res: &GnssResiduals, _: &LatentFit) -> Option<OwnedEffect> {
+        (!latent::declared(&patterns(res))).then_some(OwnedEffect::CommonMode)
+    }
+}

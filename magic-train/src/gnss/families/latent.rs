@@ -1,0 +1,301 @@
+//! What the latent families (whose variables the encoder would infer every day: a network
+//! translation, an elevation term, a second source) share: each is a pattern over the channels
+//! with a daily amplitude, scored by predicting each station from the other stations (leave one
+//! station out) on the neighbouring days (±[`NEIGHBOUR_WINDOWS`] days, the day itself excluded,
+//! best window taken), on the residuals less their running mean over ±[`LATENT_HIGHPASS_DAYS`]
+//! days. A day-to-day white network jitter is noise, not an effect: only a term that persists
+//! from day to day and is shared by the network scores.
+//!
+//! **Chance.** The family's daily fit is removed and each station's series is given a random sign
+//! and direction of time ([`flip_reverse`]: network coherence destroyed, every station's own
+//! series kept whole), then projected again like the residuals themselves.
+
+use crate::analysis::score::weighted_gain;
+use crate::analysis::surrogate::flip_reverse;
+use crate::gnss::GnssResiduals;
+use rand::rngs::StdRng;
+
+/// Days on each side of a day whose residuals predict it (the best of these windows is taken:
+/// from weather-like terms to slow transients).
+pub const NEIGHBOUR_WINDOWS: [usize; 3] = [3, 10, 30];
+/// Half-width (days) of the running mean removed from the residuals before the latent families
+/// are scored (see [`highpass`]): they are judged on variations faster than about two years.
+/// Slower ones are dominated by each station's own red noise (monument and reference-frame
+/// wander), of which a split of a few years holds only a few independent cycles: chance coherence
+/// between stations is then large, and the sign/time-reversal surrogates, which can only rearrange
+/// those few cycles, understate how large it gets. Weather-like terms, seasons (a whole number of
+/// cycles in the window) and transients of up to a year or two are kept.
+pub const LATENT_HIGHPASS_DAYS: usize = 365;
+/// Squared norm (standardised units per unit of the effect's variable) below which a projected
+/// pattern counts as already produced by F (the effect is declared).
+pub const DECLARED_NORM2: f64 = 1e-12;
+
+/// A latent family's fit: its held-out score (share of the residual variance) and the
+/// neighbour window that gave it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LatentFit {
+    /// Share of the analysed split's residual variance explained.
+    pub score: f64,
+    /// Neighbour window (days).
+    pub window: usize,
+}
+
+/// Every channel less its running mean over ±h days (the mean of the days available at the ends):
+/// variations slower than about 2h days removed, faster ones kept.
+pub fn highpass(r: &[f64], nc: usize, h: usize) -> Vec<f64> {
+    let t_n = r.len() / nc;
+    let mut pre = vec![0.0; (t_n + 1) * nc];
+    for t in 0..t_n {
+        for c in 0..nc {
+            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
+        }
+    }
+    let mut out = r.to_vec();
+    for t in 0..t_n {
+        let (lo, hi) = (t.saturating_sub(h), (t + h + 1).min(t_n));
+        let k = (hi - lo) as f64;
+        for c in 0..nc {
+            out[t * nc + c] -= (pre[hi * nc + c] - pre[lo * nc + c]) / k;
+        }
+    }
+    out
+}
+
+/// Cross products of the residuals with their neighbour means: `c = Σₜ rₜ mₜᵀ`, `m = Σₜ mₜ mₜᵀ`,
+/// where `mₜ` is the mean of the rows within ±w of t, t excluded.
+pub struct Cross {
+    nc: usize,
+    c: Vec<f64>,
+    m: Vec<f64>,
+}
+
+/// [`Cross`] of `r` for window `w`.
+pub fn cross(r: &[f64], nc: usize, w: usize) -> Cross {
+    let t_n = r.len() / nc;
+    let mut pre = vec![0.0; (t_n + 1) * nc];
+    for t in 0..t_n {
+        for c in 0..nc {
+            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
+        }
+    }
+    let (mut cm, mut mm) = (vec![0.0; nc * nc], vec![0.0; nc * nc]);
+    let mut m = vec![0.0; nc];
+    for t in 0..t_n {
+        let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
+        let k = (hi - lo - 1) as f64;
+        let row = &r[t * nc..(t + 1) * nc];
+        for c in 0..nc {
+            m[c] = (pre[hi * nc + c] - pre[lo * nc + c] - row[c]) / k;
+        }
+        for a in 0..nc {
+            let (ra, ma) = (row[a], m[a]);
+            let (crow, mrow) = (&mut cm[a * nc..(a + 1) * nc], &mut mm[a * nc..(a + 1) * nc]);
+            for b in 0..nc {
+                crow[b] += ra * m[b];
+                mrow[b] += ma * m[b];
+            }
+        }
+    }
+    Cross { nc, c: cm, m: mm }
+}
+
+/// Leave-one-station-out prediction of every channel c of station i by `g_c · â`, â fitted
+/// (least squares) to the neighbour means of the other stations' channels: returns
+/// `(Σ r·p, Σ p²)` over days and channels.
+pub fn loso_ab(g: &[f64], x: &Cross, ns: usize) -> (f64, f64) {
+    let nc = x.nc;
+    let mut mg = vec![0.0; nc];
+    let mut cg = vec![0.0; nc];
+    for a in 0..nc {
+        let (mut s1, mut s2) = (0.0, 0.0);
+        for b in 0..nc {
+            s1 += x.m[a * nc + b] * g[b];
+            s2 += x.c[a * nc + b] * g[b];
+        }
+        mg[a] = s1;
+        cg[a] = s2;
+    }
+    let gmg: f64 = g.iter().zip(&mg).map(|(a, b)| a * b).sum();
+    let gg: f64 = g.iter().map(|v| v * v).sum();
+    let (mut sa, mut sb) = (0.0, 0.0);
+    if gg < DECLARED_NORM2 {
+        return (0.0, 0.0);
+    }
+    for i in 0..ns {
+        let ci: Vec<usize> = (0..nc / ns).map(|k| k * ns + i).collect();
+        let own: f64 = ci.iter().map(|&c| g[c] * g[c]).sum();
+        if own == 0.0 {
+            continue;
+        }
+        let n = gg - own;
+        if n <= 1e-12 * gg {
+            continue;
+        }
+        let mut umu = gmg;
+        for &a in &ci {
+            umu -= 2.0 * g[a] * mg[a];
+            for &b in &ci {
+                umu += g[a] * g[b] * x.m[a * nc + b];
+            }
+        }
+        for &a in &ci {
+            let mut cu = cg[a];
+            for &b in &ci {
+                cu -= x.c[a * nc + b] * g[b];
+            }
+            sa += g[a] * cu / n;
+            sb += g[a] * g[a] * umu / (n * n);
+        }
+    }
+    (sa, sb)
+}
+
+/// The leave-one-station-out gain of pattern `g`.
+pub fn loso_gain(g: &[f64], x: &Cross, ns: usize) -> f64 {
+    weighted_gain(loso_ab(g, x, ns))
+}
+
+/// The cross products of the analysed block, high-passed, for every neighbour window.
+pub fn windows(res: &GnssResiduals) -> Vec<(usize, Cross)> {
+    let nc = res.nc();
+    let r = highpass(&res.fit.r, nc, LATENT_HIGHPASS_DAYS);
+    NEIGHBOUR_WINDOWS
+        .iter()
+        .map(|&w| (w, cross(&r, nc, w)))
+        .collect()
+}
+
+/// The best window's summed gain of `patterns` (a family with several patterns, like a
+/// three-component translation, predicts with all of them), as a share of the residual variance.
+pub fn best_window(res: &GnssResiduals, patterns: &[Vec<f64>]) -> LatentFit {
+    let ns = res.ns();
+    let mut best = (0.0, 0usize);
+    for (w, x) in windows(res) {
+        let g: f64 = patterns.iter().map(|p| loso_gain(p, &x, ns)).sum();
+        if g > best.0 || best.1 == 0 {
+            best = (g, w);
+        }
+    }
+    LatentFit {
+        score: best.0 / res.ctx.total_fit.max(1e-300),
+        window: best.1,
+    }
+}
+
+/// Daily least-squares amplitude of a pattern (standardised units) on every row.
+///
+/// A pattern already inside F's tangent space (an effect the model declares) projects to
+/// (numerically) nothing: its amplitude is then 0.
+pub fn daily_amplitude(r: &[f64], nc: usize, g: &[f64]) -> Vec<f64> {
+    let gg: f64 = g.iter().map(|v| v * v).sum();
+    if gg < DECLARED_NORM2 {
+        return vec![0.0; r.len() / nc];
+    }
+    r.chunks(nc)
+        .map(|row| row.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() / gg)
+        .collect()
+}
+
+/// Lag-one autocovariance of a series (the variance of its day-to-day persistent part).
+pub fn persistent_var(a: &[f64]) -> f64 {
+    if a.len() < 2 {
+        return 0.0;
+    }
+    a.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / (a.len() - 1) as f64
+}
+
+/// A latent family's surrogate: the daily fits of `patterns` removed, every station's series
+/// given a random sign and direction of time, projected again.
+pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
+    let nc = res.nc();
+    let mut r = res.fit.r.clone();
+    for g in patterns {
+        let a = daily_amplitude(&r, nc, g);
+        for (row, at) in r.chunks_mut(nc).zip(&a) {
+            row.iter_mut().zip(g).for_each(|(x, gc)| *x -= at * gc);
+        }
+    }
+    let r = flip_reverse(&r, nc, res.ns(), rng);
+    res.with_fit(res.project_rows(&r))
+}
+
+/// Whether every pattern projects to (numerically) nothing: F already produces it.
+pub fn declared(patterns: &[Vec<f64>]) -> bool {
+    patterns
+        .iter()
+        .all(|g| g.iter().map(|v| v * v).sum::<f64>() < DECLARED_NORM2)
+}
+
+/// `v` rounded to three decimals.
+pub fn round3(v: f64) -> f64 {
+    (v * 1000.0).round() / 1000.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn noise(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    #[test]
+    fn highpass_removes_slow_variations_and_keeps_fast_ones() {
+        // Two channels over 1 900 days: a constant plus a linear trend (slow), and a 60-day
+        // sinusoid (fast).
+        let (n, h) = (1900usize, LATENT_HIGHPASS_DAYS);
+        let r: Vec<f64> = (0..n)
+            .flat_map(|t| {
+                let t = t as f64;
+                [3.0 + 0.01 * t, (std::f64::consts::TAU * t / 60.0).sin()]
+            })
+            .collect();
+        let out = highpass(&r, 2, h);
+        for t in h..n - h {
+            assert!(out[2 * t].abs() < 1e-9, "day {t}: {}", out[2 * t]);
+        }
+        let var = |c: usize, v: &[f64]| (0..n).map(|t| v[2 * t + c].powi(2)).sum::<f64>();
+        let kept = var(1, &out) / var(1, &r);
+        assert!((kept - 1.0).abs() < 0.05, "fast variance kept: {kept}");
+        let m = (0..n).map(|t| r[2 * t]).sum::<f64>() / n as f64;
+        let slow = (0..n).map(|t| (r[2 * t] - m).powi(2)).sum::<f64>();
+        assert!(var(0, &out) < 0.05 * slow, "slow variance kept");
+    }
+
+    #[test]
+    fn leave_one_station_out_matches_a_direct_computation() {
+        let (ns, nc, t_n, w) = (3usize, 9usize, 40usize, 2usize);
+        let r = noise(t_n * nc, 11);
+        let g = noise(nc, 12);
+        let (a, b) = loso_ab(&g, &cross(&r, nc, w), ns);
+        let (mut da, mut db) = (0.0, 0.0);
+        for t in 0..t_n {
+            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
+            let m: Vec<f64> = (0..nc)
+                .map(|c| {
+                    (lo..hi)
+                        .filter(|&u| u != t)
+                        .map(|u| r[u * nc + c])
+                        .sum::<f64>()
+                        / (hi - lo - 1) as f64
+                })
+                .collect();
+            for i in 0..ns {
+                let others: Vec<usize> = (0..nc).filter(|c| c % ns != i).collect();
+                let amp = others.iter().map(|&c| g[c] * m[c]).sum::<f64>()
+                    / others.iter().map(|&c| g[c] * g[c]).sum::<f64>();
+                for c in (0..nc).filter(|c| c % ns == i) {
+                    let p = g[c] * amp;
+                    da += r[t * nc + c] * p;
+                    db += p * p;
+                }
+            }
+        }
+        assert!(
+            (a - da).abs() < 1e-9 * (1.0 + da.abs()) && (b - db).abs() < 1e-9 * (1.0 + db.abs()),
+            "{a} {da} {b} {db}"
+        );
+    }
+}

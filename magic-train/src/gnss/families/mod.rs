@@ -1,0 +1,44 @@
+//! The GNSS effect families, one type per file; [`all`] registers them (one line each).
+//!
+//! Two kinds share their machinery: *latent* families ([`latent`]: a pattern with a daily
+//! amplitude the encoder would infer, scored by leave-one-station-out prediction on neighbouring
+//! days) and *dated* families ([`dated`]: functions of the date with fitted constants, scored by
+//! cross-validation over blocks of days and on the held-out splits).
+
+pub mod common_mode;
+pub mod dated;
+pub mod drift;
+pub mod elevation;
+pub mod latent;
+pub mod seasonal;
+pub mod second_source;
+pub mod step;
+
+use crate::analysis::DynFamily;
+use crate::gnss::GnssResiduals;
+
+/// Every GNSS family, in report order.
+pub fn all() -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
+    vec![
+        Box::new(common_mode::CommonMode),
+        Box::new(seasonal::Seasonal),
+        Box::new(elevation::Elevation),
+        Box::new(step::Step),
+        Box::new(second_source::SecondSource),
+        Box::new(drift::Drift),
+    ]
+}
+
+/// The names of [`all`], in report order.
+pub fn names() -> Vec<&'static str> {
+    all().iter().map(|f| f.name()).collect()
+}
+
+/// `YYYY-MM-DD` of a day number (rounded).
+pub fn iso_date(day: f64) -> String {
+    if !day.is_finite() {
+        return String::new();
+    }
+    let (y, m, d) = magic_core::time::civil_from_days(day.round() as i64);
+    format!("{y:04}-{m:02}-{d:02}")
+}

@@ -1,0 +1,181 @@
+//! `step`: an offset at one station from one epoch on (an antenna change, an earthquake, a
+//! disturbed monument). Fitted: declared, the offset (mm, E N U) enters F from its epoch on.
+
+use super::dated::{self, Scored, TimeFit};
+use super::latent::round3;
+use crate::analysis::projection::{deproject, projected_response};
+use crate::analysis::Family;
+use crate::gnss::residuals::Block;
+use crate::gnss::GnssResiduals;
+use crate::model::OwnedEffect;
+use crate::numerics::median;
+use anyhow::Result;
+use rand::rngs::StdRng;
+use rayon::prelude::*;
+use serde_json::json;
+
+/// Half-width (days) of the windows compared by the step scan.
+pub const STEP_SCAN_DAYS: usize = 30;
+
+/// The step family.
+pub struct Step;
+
+/// A step at one station.
+pub struct StepFit {
+    /// Station index.
+    pub station: usize,
+    /// First day with the offset.
+    pub epoch: f64,
+    /// Offsets (standardised units) of the station's channels, E N U, de-projected.
+    pub offset: Vec<f64>,
+    /// Projected response of the step on every channel.
+    response: Vec<f64>,
+    /// Share of the fitted rows on or after the epoch (the step has zero mean over them).
+    frac_after: f64,
+    /// The scan statistic of the chosen station and epoch.
+    pub stat: f64,
+}
+
+impl TimeFit for StepFit {
+    fn predict(&self, c: usize, d: f64) -> f64 {
+        self.response[c] * (if d >= self.epoch { 1.0 } else { 0.0 } - self.frac_after)
+    }
+    fn active(&self, c: usize) -> bool {
+        self.response[c] != 0.0
+    }
+}
+
+/// The step scan: for every station and epoch, the difference of the means of the
+/// [`STEP_SCAN_DAYS`] rows after and before, normalised per channel by its typical (median)
+/// value over epochs; the largest sum over the station's channels wins. The offset is then
+/// the least-squares one of a two-level fit (mean after the epoch minus mean before).
+pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepFit {
+    let t_n = b.days.len();
+    let w = STEP_SCAN_DAYS.min(t_n / 4).max(1);
+    let nk = nc / ns;
+    let mut pre = vec![0.0; (t_n + 1) * nc];
+    for t in 0..t_n {
+        for c in 0..nc {
+            pre[(t + 1) * nc + c] = pre[t * nc + c] + b.r[t * nc + c];
+        }
+    }
+    let mean =
+        |c: usize, a: usize, z: usize| (pre[z * nc + c] - pre[a * nc + c]) / (z - a).max(1) as f64;
+    let best = (0..ns)
+        .into_par_iter()
+        .map(|i| {
+            let chans: Vec<usize> = (0..nk).map(|k| k * ns + i).collect();
+            let d: Vec<Vec<f64>> = chans
+                .iter()
+                .map(|&c| {
+                    (w..=t_n - w)
+                        .map(|e| mean(c, e, e + w) - mean(c, e - w, e))
+                        .collect()
+                })
+                .collect();
+            let norm: Vec<f64> = d
+                .iter()
+                .map(|v| {
+                    (median(&mut v.iter().map(|x| x * x).collect::<Vec<_>>()) / 0.4549).max(1e-30)
+                })
+                .collect();
+            let mut bi = (0usize, f64::MIN);
+            for j in 0..d[0].len() {
+                let s: f64 = (0..nk).map(|k| d[k][j] * d[k][j] / norm[k]).sum();
+                if s > bi.1 {
+                    bi = (j + w, s);
+                }
+            }
+            (i, bi.0, bi.1)
+        })
+        .max_by(|a, b| a.2.total_cmp(&b.2))
+        .unwrap_or((0, t_n / 2, 0.0));
+    let (station, e, stat) = best;
+    let chans: Vec<usize> = (0..nk).map(|k| k * ns + station).collect();
+    let d: Vec<f64> = chans
+        .iter()
+        .map(|&c| mean(c, e, t_n) - mean(c, 0, e))
+        .collect();
+    let offset = deproject(tangent, &chans, &d);
+    let response = projected_response(tangent, nc, &chans, &offset);
+    let frac_after = (t_n - e) as f64 / t_n.max(1) as f64;
+    StepFit {
+        station,
+        epoch: b.days.get(e).copied().unwrap_or(f64::NAN),
+        offset,
+        response,
+        frac_after,
+        stat,
+    }
+}
+
+impl Family<GnssResiduals> for Step {
+    type Fit = Scored<StepFit>;
+
+    fn name(&self) -> &'static str {
+        "step"
+    }
+    fn fit(&self, res: &GnssResiduals) -> Result<Self::Fit> {
+        let (nc, ns, tangent) = (res.nc(), res.ns(), &res.ctx.tangent);
+        Ok(dated::fit_scored(res, &|b| fit_block(b, nc, ns, tangent)))
+    }
+    fn score(&self, fit: &Self::Fit) -> f64 {
+        fit.score
+    }
+    fn surrogate(
+        &self,
+        res: &GnssResiduals,
+        fit: &Self::Fit,
+        rng: &mut StdRng,
+    ) -> Result<GnssResiduals> {
+        Ok(dated::surrogate(res, &fit.fit, rng))
+    }
+    /// Station, epoch, offset (mm, E N U) and the scan statistic.
+    fn params(&self, res: &GnssResiduals, fit: &Self::Fit) -> serde_json::Value {
+        let (ns, f) = (res.ns(), &fit.fit);
+        json!({
+            "station": res.ctx.network.names[f.station],
+            "epoch": super::iso_date(f.epoch),
+            "offset_mm": (0..3).map(|k| round3(f.offset[k] * res.ctx.scale[k * ns + f.station])).collect::<Vec<_>>(),
+            "scan_statistic": round3(f.stat),
+        })
+    }
+    fn declare(&self, res: &GnssResiduals, fit: &Self::Fit) -> Option<OwnedEffect> {
+        let (ns, f) = (res.ns(), &fit.fit);
+        f.epoch.is_finite().then(|| OwnedEffect::Step {
+            station: f.station as u16,
+            epoch_day: f.epoch as f32,
+            offset_mm: core::array::from_fn(|k| {
+                (f.offset[k] * res.ctx.scale[k * ns + f.station]) as f32
+            }),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn step_scan_finds_a_step_in_noise() {
+        let (ns, nc, t_n) = (4usize, 12usize, 600usize);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let mut r: Vec<f64> = (0..t_n * nc).map(|_| rng.random_range(-1.0..1.0)).collect();
+        for t in 250..t_n {
+            for k in 0..3 {
+                r[t * nc + k * ns + 2] += [1.5, -1.0, 2.0][k];
+            }
+        }
+        let b = Block {
+            days: (0..t_n).map(|t| 14_000.0 + t as f64).collect(),
+            r,
+        };
+        let f = fit_block(&b, nc, ns, &[]);
+        assert_eq!(f.station, 2);
+        assert_eq!(f.epoch, 14_250.0);
+        for (o, want) in f.offset.iter().zip([1.5, -1.0, 2.0]) {
+            assert!((o - want).abs() < 0.15, "{o} vs {want}");
+        }
+    }
+}

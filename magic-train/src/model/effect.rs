@@ -1,0 +1,179 @@
+//! Declared effects owned by the host: the trainer's copy of `magic_core::effects::Effect`, with
+//! the bytes the core's view borrows.
+
+use super::le_f32_bytes;
+use magic_core::effects::Effect;
+use magic_core::quant::LeF32;
+
+/// A declared effect owned by the host (see `magic_core::effects::Effect`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[serde(tag = "family", rename_all = "snake_case")]
+pub enum OwnedEffect {
+    /// Daily network translation (3 latent variables).
+    CommonMode,
+    /// Vertical term linear in elevation (1 latent variable).
+    Elevation {
+        /// Reference elevation (km).
+        z_ref_km: f32,
+    },
+    /// Second Mogi source at a fixed position (1 latent variable: its ΔV).
+    SecondSource {
+        /// East (km).
+        x_km: f32,
+        /// North (km).
+        y_km: f32,
+        /// Depth (km).
+        depth_km: f32,
+    },
+    /// Per-channel annual + semiannual coefficients (4 per channel).
+    Seasonal {
+        /// Coefficients (mm).
+        coef: Vec<f32>,
+    },
+    /// A step at one station.
+    Step {
+        /// Station index.
+        station: u16,
+        /// First day with the offset.
+        epoch_day: f32,
+        /// Offset (mm, E N U).
+        offset_mm: [f32; 3],
+    },
+    /// Per-channel drift.
+    Drift {
+        /// Reference day.
+        t0_day: f32,
+        /// Rates (mm/yr).
+        rate: Vec<f32>,
+    },
+    /// RTM: each spectrum's true sun from its date (see `magic_core::effects`).
+    Illumination {
+        /// Site latitude (degrees north).
+        lat_deg: f32,
+        /// Site longitude (degrees east).
+        lon_deg: f32,
+        /// Acquisition time (hours UTC).
+        utc_hours: f32,
+        /// Sensor view azimuth (degrees).
+        view_azimuth_deg: f32,
+    },
+    /// RTM: a constant reflectance per observed band.
+    BandOffset {
+        /// Offsets (reflectance), one per observed band.
+        offset: Vec<f32>,
+    },
+}
+
+impl OwnedEffect {
+    /// Little-endian bytes of the effect's arrays (empty for effects without arrays).
+    pub fn bytes(&self) -> Vec<u8> {
+        match self {
+            OwnedEffect::Seasonal { coef } => le_f32_bytes(coef),
+            OwnedEffect::Drift { rate, .. } => le_f32_bytes(rate),
+            OwnedEffect::BandOffset { offset } => le_f32_bytes(offset),
+            _ => vec![],
+        }
+    }
+
+    /// The core's view, borrowing `bytes` (from [`OwnedEffect::bytes`]).
+    pub fn borrow<'a>(&self, bytes: &'a [u8]) -> Effect<'a> {
+        match *self {
+            OwnedEffect::CommonMode => Effect::CommonMode,
+            OwnedEffect::Elevation { z_ref_km } => Effect::Elevation { z_ref_km },
+            OwnedEffect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            } => Effect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            },
+            OwnedEffect::Seasonal { .. } => Effect::Seasonal { coef: LeF32(bytes) },
+            OwnedEffect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            } => Effect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            },
+            OwnedEffect::Drift { t0_day, .. } => Effect::Drift {
+                t0_day,
+                rate: LeF32(bytes),
+            },
+            OwnedEffect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            } => Effect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            },
+            OwnedEffect::BandOffset { .. } => Effect::BandOffset {
+                offset: LeF32(bytes),
+            },
+        }
+    }
+
+    /// Copies a core effect.
+    pub fn from_core(e: &Effect<'_>) -> OwnedEffect {
+        match *e {
+            Effect::CommonMode => OwnedEffect::CommonMode,
+            Effect::Elevation { z_ref_km } => OwnedEffect::Elevation { z_ref_km },
+            Effect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            } => OwnedEffect::SecondSource {
+                x_km,
+                y_km,
+                depth_km,
+            },
+            Effect::Seasonal { coef } => OwnedEffect::Seasonal {
+                coef: coef.iter().collect(),
+            },
+            Effect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            } => OwnedEffect::Step {
+                station,
+                epoch_day,
+                offset_mm,
+            },
+            Effect::Drift { t0_day, rate } => OwnedEffect::Drift {
+                t0_day,
+                rate: rate.iter().collect(),
+            },
+            Effect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            } => OwnedEffect::Illumination {
+                lat_deg,
+                lon_deg,
+                utc_hours,
+                view_azimuth_deg,
+            },
+            Effect::BandOffset { offset } => OwnedEffect::BandOffset {
+                offset: offset.iter().collect(),
+            },
+        }
+    }
+
+    /// Number of latent variables.
+    pub fn n_latent(&self) -> usize {
+        self.borrow(&[]).n_latent()
+    }
+
+    /// Family name.
+    pub fn family(&self) -> &'static str {
+        self.borrow(&[]).family()
+    }
+}
