@@ -140,6 +140,19 @@ impl Family<GnssResiduals> for Step {
             "scan_statistic": round3(f.stat),
         })
     }
+    fn key_params(&self, res: &GnssResiduals, fit: &Self::Fit) -> Vec<(&'static str, f64)> {
+        let (ns, f) = (res.ns(), &fit.fit);
+        let mm = |k: usize| f.offset[k] * res.ctx.scale[k * ns + f.station];
+        vec![
+            ("epoch_day", f.epoch),
+            ("offset_e_mm", mm(0)),
+            ("offset_n_mm", mm(1)),
+            ("offset_u_mm", mm(2)),
+        ]
+    }
+    fn resample(&self, res: &GnssResiduals, fit: &Self::Fit, rng: &mut StdRng) -> Option<Result<GnssResiduals>> {
+        Some(Ok(dated::resample(res, &fit.fit, rng)))
+    }
     fn declare(&self, res: &GnssResiduals, fit: &Self::Fit) -> Option<OwnedEffect> {
         let (ns, f) = (res.ns(), &fit.fit);
         f.epoch.is_finite().then(|| OwnedEffect::Step {
