@@ -82,14 +82,14 @@ def main(argv=None) -> None:
         tables_dir = a.tables or Path(os.environ.get("MAGIC_DATA", "../shared/data")) / "rtm"
         synth = synthetic_cube(model, magic.Tables.load(tables_dir), a.size)
         store = a.save_input or tempfile.mkdtemp(suffix=".zarr")
-        synth.to_dataset().chunk(chunks).to_zarr(store, mode="w")
+        synth.to_dataset().chunk(chunks).to_zarr(store, mode="w", zarr_format=2)
         cube = xr.open_zarr(store)["reflectance"]  # read lazily, chunk by chunk, as a real tile
 
     with LocalCluster(n_workers=a.workers, threads_per_worker=1,
                       dashboard_address=None) as cluster, Client(cluster):
         result = magic.xarray.invert(cube, model, dim="band", errors="nan", threads=1)
         t0 = time.perf_counter()
-        result.to_zarr(a.out, mode="w")  # the graph runs here, on the cluster
+        result.to_zarr(a.out, mode="w", zarr_format=2)  # the graph runs here, on the cluster
         dt = time.perf_counter() - t0
 
     n = cube.sizes["y"] * cube.sizes["x"]
