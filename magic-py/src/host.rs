@@ -3,8 +3,9 @@
 //! and the reader of the spectral tables.
 
 use magic_core::Model;
-use magic_train::data::rtm_tables::RtmTables;
-use magic_train::records;
+use magic_train::data::records;
+use magic_train::RtmTables;
+
 use std::path::{Path, PathBuf};
 
 /// The spectral tables, owned, in f64 (the `rtm/` folder of the data).
