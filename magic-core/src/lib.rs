@@ -14,7 +14,6 @@
 //! * [`model_file`] — the exported model, decoded without allocation;
 //! * [`sun`] — the sun's zenith and azimuth from date, time and place (illumination geometry);
 //! * [`invert`](mod@invert) — observations to variables, reconstruction, residual and quality flags.
-//! * [`lsq`] — the classical baseline: per-day Levenberg–Marquardt fits with the exact Jacobian.
 #![no_std]
 #![deny(missing_docs)]
 // `unsafe` is denied everywhere except the Armv7E-M int8 kernel (`quant::dsp`, feature `dsp`,
@@ -34,7 +33,6 @@ pub use error::{Error, MessageSink};
 pub use real::{Dual, Real};
 pub mod invert;
 pub mod line;
-pub mod lsq;
 pub mod model_file;
 pub mod nn;
 pub mod quant;

@@ -1,5 +1,5 @@
 //! The classical baseline on a GNSS split (`magic classical`): every day is fitted on its own by
-//! nonlinear least squares ([`magic_core::lsq`]: Levenberg–Marquardt with the exact Jacobian,
+//! nonlinear least squares ([`crate::lsq`]: Levenberg–Marquardt with the exact Jacobian,
 //! multi-start from a coarse grid over the bounds), with no encoder and no correction.
 //!
 //! This is the best any per-day Mogi inversion (model B) can do on the paper's metric: the MSE it
@@ -9,10 +9,10 @@
 
 use crate::data::gnss::{day_number, GnssData};
 use crate::export::OwnedEffect;
+use crate::lsq::{self, Grid, Options, Problem};
 use crate::pipeline::effect_bounds;
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::effects::{mogi_with_effects, Effect};
-use magic_core::lsq::{self, Grid, Options, Problem};
 use magic_core::mogi::{PAPER_BOUNDS, PARAM_NAMES};
 use rayon::prelude::*;
 use serde::Serialize;

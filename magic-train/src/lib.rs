@@ -10,6 +10,7 @@ pub mod demo;
 pub mod demo_qemu;
 pub mod eval;
 pub mod export;
+pub mod lsq;
 pub mod missing;
 pub mod nets;
 pub mod physics;
