@@ -11,6 +11,79 @@
 use super::packed_get;
 use core::arch::asm;
 
+// The loop bodies of the kernels below, written once. Each expands to assembly text (one
+// instruction per line) through `concat!`, so the kernels' instructions are exactly those
+// written out: the instruction counts measured under QEMU do not depend on the macros.
+
+/// One row of a group of four columns: the row's four weights in register `$w` (bytes 0–3),
+/// the group's packed activations in `r2` (x0, x2) and `r3` (x1, x3); two `SMLAD`s add the four
+/// products to accumulator `$acc`. `$w` is overwritten.
+#[rustfmt::skip]
+macro_rules! row_mac {
+    ($acc:literal, $w:literal) => {
+        concat!(
+            "sxtb16 {t}, ", $w, "\n",
+            "smlad ", $acc, ", {t}, r2, ", $acc, "\n",
+            "sxtb16 ", $w, ", ", $w, ", ror #8\n",
+            "smlad ", $acc, ", ", $w, ", r3, ", $acc, "\n",
+        )
+    };
+}
+
+/// One group of four columns for a block of four rows (accumulators `r8`–`r11`), the weights
+/// loaded word by word with `LDR` (which may be unaligned).
+macro_rules! group_ldr {
+    () => {
+        concat!(
+            "ldm {xp}!, {{r2, r3}}\n",
+            "ldr r5, [{wp}], #4\n",
+            row_mac!("r8", "r5"),
+            "ldr r5, [{wp}], #4\n",
+            row_mac!("r9", "r5"),
+            "ldr r5, [{wp}], #4\n",
+            row_mac!("r10", "r5"),
+            "ldr r5, [{wp}], #4\n",
+            row_mac!("r11", "r5"),
+        )
+    };
+}
+
+/// One group of four columns for a block of four rows (accumulators `r8`–`r11`), the weights of
+/// two rows at a time loaded with `LDM` (word aligned).
+macro_rules! group_ldm {
+    () => {
+        concat!(
+            "ldm {xp}!, {{r2, r3}}\n",
+            "ldm {wp}!, {{r4, r5}}\n",
+            row_mac!("r8", "r4"),
+            row_mac!("r9", "r5"),
+            "ldm {wp}!, {{r4, r5}}\n",
+            row_mac!("r10", "r4"),
+            row_mac!("r11", "r5"),
+        )
+    };
+}
+
+/// Two groups of four columns of one row (eight weights by two `LDR`, four activation words by
+/// one `LDM`) into `{acc}`.
+macro_rules! two_groups {
+    () => {
+        concat!(
+            "ldr {w0}, [{wp}], #4\n",
+            "ldr {w1}, [{wp}], #4\n",
+            "ldm {xp}!, {{r2, r3, r4, r5}}\n",
+            "sxtb16 {t}, {w0}\n",
+            "smlad {acc}, {t}, r2, {acc}\n",
+            "sxtb16 {t}, {w0}, ror #8\n",
+            "smlad {acc}, {t}, r3, {acc}\n",
+            "sxtb16 {t}, {w1}\n",
+            "smlad {acc}, {t}, r4, {acc}\n",
+            "sxtb16 {t}, {w1}, ror #8\n",
+            "smlad {acc}, {t}, r5, {acc}\n",
+        )
+    };
+}
+
 /// The FPU's square root (`VSQRT.F32`, correctly rounded like libm's `sqrtf`, which on this
 /// target is a software routine of about 80 instructions and 480 bytes). Used through
 /// [`crate::mogi::sqrt`].
@@ -120,27 +193,7 @@ pub fn matvec_i8_packed(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mu
                 "beq 4f",
                 "3:",
                 // One group at a time (weights by LDR, which may be unaligned).
-                "ldm {xp}!, {{r2, r3}}",
-                "ldr r5, [{wp}], #4",
-                "sxtb16 {t}, r5",
-                "smlad r8, {t}, r2, r8",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r8, r5, r3, r8",
-                "ldr r5, [{wp}], #4",
-                "sxtb16 {t}, r5",
-                "smlad r9, {t}, r2, r9",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r9, r5, r3, r9",
-                "ldr r5, [{wp}], #4",
-                "sxtb16 {t}, r5",
-                "smlad r10, {t}, r2, r10",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r10, r5, r3, r10",
-                "ldr r5, [{wp}], #4",
-                "sxtb16 {t}, r5",
-                "smlad r11, {t}, r2, r11",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r11, r5, r3, r11",
+                group_ldr!(),
                 "cmp {wp}, {end}",
                 "bne 3b",
                 "4:",
@@ -149,82 +202,10 @@ pub fn matvec_i8_packed(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mu
                 "beq 6f",
                 "5:",
                 // Four groups per iteration, weights by LDM (word aligned).
-                "ldm {xp}!, {{r2, r3}}",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r8, {t}, r2, r8",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r8, r4, r3, r8",
-                "sxtb16 {t}, r5",
-                "smlad r9, {t}, r2, r9",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r9, r5, r3, r9",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r10, {t}, r2, r10",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r10, r4, r3, r10",
-                "sxtb16 {t}, r5",
-                "smlad r11, {t}, r2, r11",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r11, r5, r3, r11",
-                "ldm {xp}!, {{r2, r3}}",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r8, {t}, r2, r8",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r8, r4, r3, r8",
-                "sxtb16 {t}, r5",
-                "smlad r9, {t}, r2, r9",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r9, r5, r3, r9",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r10, {t}, r2, r10",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r10, r4, r3, r10",
-                "sxtb16 {t}, r5",
-                "smlad r11, {t}, r2, r11",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r11, r5, r3, r11",
-                "ldm {xp}!, {{r2, r3}}",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r8, {t}, r2, r8",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r8, r4, r3, r8",
-                "sxtb16 {t}, r5",
-                "smlad r9, {t}, r2, r9",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r9, r5, r3, r9",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r10, {t}, r2, r10",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r10, r4, r3, r10",
-                "sxtb16 {t}, r5",
-                "smlad r11, {t}, r2, r11",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r11, r5, r3, r11",
-                "ldm {xp}!, {{r2, r3}}",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r8, {t}, r2, r8",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r8, r4, r3, r8",
-                "sxtb16 {t}, r5",
-                "smlad r9, {t}, r2, r9",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r9, r5, r3, r9",
-                "ldm {wp}!, {{r4, r5}}",
-                "sxtb16 {t}, r4",
-                "smlad r10, {t}, r2, r10",
-                "sxtb16 r4, r4, ror #8",
-                "smlad r10, r4, r3, r10",
-                "sxtb16 {t}, r5",
-                "smlad r11, {t}, r2, r11",
-                "sxtb16 r5, r5, ror #8",
-                "smlad r11, r5, r3, r11",
+                group_ldm!(),
+                group_ldm!(),
+                group_ldm!(),
+                group_ldm!(),
                 "cmp {wp}, {end}",
                 "bne 5b",
                 "6:",
@@ -292,28 +273,8 @@ pub fn dot_i8_packed(w: &[u8], xp: &[u32]) -> i32 {
         unsafe {
             asm!(
                 "2:",
-                "ldr {w0}, [{wp}], #4",
-                "ldr {w1}, [{wp}], #4",
-                "ldm {xp}!, {{r2, r3, r4, r5}}",
-                "sxtb16 {t}, {w0}",
-                "smlad {acc}, {t}, r2, {acc}",
-                "sxtb16 {t}, {w0}, ror #8",
-                "smlad {acc}, {t}, r3, {acc}",
-                "sxtb16 {t}, {w1}",
-                "smlad {acc}, {t}, r4, {acc}",
-                "sxtb16 {t}, {w1}, ror #8",
-                "smlad {acc}, {t}, r5, {acc}",
-                "ldr {w0}, [{wp}], #4",
-                "ldr {w1}, [{wp}], #4",
-                "ldm {xp}!, {{r2, r3, r4, r5}}",
-                "sxtb16 {t}, {w0}",
-                "smlad {acc}, {t}, r2, {acc}",
-                "sxtb16 {t}, {w0}, ror #8",
-                "smlad {acc}, {t}, r3, {acc}",
-                "sxtb16 {t}, {w1}",
-                "smlad {acc}, {t}, r4, {acc}",
-                "sxtb16 {t}, {w1}, ror #8",
-                "smlad {acc}, {t}, r5, {acc}",
+                two_groups!(),
+                two_groups!(),
                 "cmp {wp}, {end}",
                 "bne 2b",
                 wp = inout(reg) w.as_ptr() => _,
