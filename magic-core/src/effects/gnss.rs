@@ -1,134 +1,14 @@
-//! Declared extra physics: terms added to the forward model F when residual analysis traces a
-//! systematic error to a named effect (the loop of `magic loop`).
-//!
-//! Two kinds:
-//! * **latent** effects add variables the encoder infers for every observation, with their own
-//!   bounds (a daily network translation, a vertical term linear in station elevation, the volume
-//!   change of a second source at a found position);
-//! * **fitted** effects are constants found by the residual analysis and applied as a function of
-//!   the observation's date (per-channel annual and semiannual terms, a step at one station from an
-//!   epoch, per-channel drift).
-//!
-//! One effect belongs to the forest-spectra problem instead: **illumination** hands INFORM the
-//! true sun of each spectrum's acquisition (zenith and relative azimuth from its date, the
-//! overpass time and the site, [`crate::sun`]) in place of the fixed sun of the paper; it changes
-//! the fixed inputs of the RTM model ([`rtm_fixed_at`]), not the observation channels.
-//!
-//! Every term is generic over [`Real`] so the trainer differentiates through it exactly and the
-//! board evaluates it in f32. Times are day numbers (days since 1970-01-01, see [`crate::time`]).
+//! The GNSS effects: their checks against a network and their terms in F (uₑ ×S, uₙ ×S, uᵥ ×S
+//! in mm), and F with effects, [`mogi_with_effects`].
 
+use super::Effect;
 use crate::mogi::{self, Network, Station};
-use crate::quant::LeF32;
 use crate::{Error, Real};
-use serde::{Deserialize, Serialize};
-
-/// Largest number of effects in one model.
-pub const MAX_EFFECTS: usize = 4;
 
 const TWO_PI: f64 = core::f64::consts::TAU;
 const YEAR_DAYS: f64 = 365.25;
 
-/// One declared effect. Observation channels are uₑ ×S, uₙ ×S, uᵥ ×S (mm).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub enum Effect<'a> {
-    /// Daily translation of the whole network: 3 latent variables (E, N, U in mm).
-    CommonMode,
-    /// Vertical displacement `k · (zᵢ − z_ref)`: 1 latent variable k (mm per km of elevation).
-    Elevation {
-        /// Reference elevation (km), the network mean.
-        z_ref_km: f32,
-    },
-    /// A second Mogi source at a fixed position: 1 latent variable, its volume change (10⁶ m³).
-    SecondSource {
-        /// East (km).
-        x_km: f32,
-        /// North (km).
-        y_km: f32,
-        /// Depth (km).
-        depth_km: f32,
-    },
-    /// Per-channel annual and semiannual terms: `coef` holds, per channel, the amplitudes of
-    /// sin(ωt), cos(ωt), sin(2ωt), cos(2ωt) with ω = 2π / 365.25 d (4 × channels f32).
-    Seasonal {
-        /// Coefficients (mm).
-        #[serde(borrow)]
-        coef: LeF32<'a>,
-    },
-    /// A step of `offset_mm` (E, N, U) at one station from `epoch_day` on.
-    Step {
-        /// Station index.
-        station: u16,
-        /// First day of the new position.
-        epoch_day: f32,
-        /// Offset (mm).
-        offset_mm: [f32; 3],
-    },
-    /// Per-channel linear drift `rate · (t − t0) / 365.25` (mm per year).
-    Drift {
-        /// Reference day.
-        t0_day: f32,
-        /// Rates (mm/yr), one per channel.
-        #[serde(borrow)]
-        rate: LeF32<'a>,
-    },
-    /// RTM models only: the sun of each acquisition from its date (no latent variable, no fitted
-    /// constant): sun zenith and azimuth at `utc_hours` on the observation's day at the site,
-    /// relative azimuth to the sensor's `view_azimuth_deg`.
-    Illumination {
-        /// Site latitude (degrees north).
-        lat_deg: f32,
-        /// Site longitude (degrees east).
-        lon_deg: f32,
-        /// Acquisition time of day (hours UTC).
-        utc_hours: f32,
-        /// Azimuth of the sensor's viewing direction (degrees from north; irrelevant for a
-        /// nadir view).
-        view_azimuth_deg: f32,
-    },
-    /// RTM models only: a constant reflectance added to each observed band (a bias of the band
-    /// model, the sensor or the atmospheric correction, fitted by the residual analysis).
-    BandOffset {
-        /// One offset per observed band (reflectance, f32).
-        #[serde(borrow)]
-        offset: LeF32<'a>,
-    },
-}
-
 impl Effect<'_> {
-    /// Number of latent variables the encoder infers for this effect.
-    pub fn n_latent(&self) -> usize {
-        match self {
-            Effect::CommonMode => 3,
-            Effect::Elevation { .. } | Effect::SecondSource { .. } => 1,
-            _ => 0,
-        }
-    }
-
-    /// Whether the effect needs the observation's date.
-    pub fn needs_time(&self) -> bool {
-        matches!(
-            self,
-            Effect::Seasonal { .. }
-                | Effect::Step { .. }
-                | Effect::Drift { .. }
-                | Effect::Illumination { .. }
-        )
-    }
-
-    /// The family name used in reports.
-    pub fn family(&self) -> &'static str {
-        match self {
-            Effect::CommonMode => "common_mode",
-            Effect::Elevation { .. } => "elevation",
-            Effect::SecondSource { .. } => "second_source",
-            Effect::Seasonal { .. } => "seasonal",
-            Effect::Step { .. } => "step",
-            Effect::Drift { .. } => "drift",
-            Effect::Illumination { .. } => "illumination",
-            Effect::BandOffset { .. } => "band_offset",
-        }
-    }
-
     /// Checks the effect against a network of `n_stations`.
     pub fn validate(&self, n_stations: usize) -> Result<(), Error> {
         let n_obs = 3 * n_stations;
@@ -293,117 +173,6 @@ impl Effect<'_> {
         }
         Ok(())
     }
-
-    /// Checks an effect of an RTM model with `n_bands` observed bands in `geometry`:
-    /// [`Effect::Illumination`] with a site on Earth and an hour of the day (physical geometry
-    /// only: the reference geometry hands INFORM cosines where angles are expected), or
-    /// [`Effect::BandOffset`] with one finite offset (|offset| < 1) per band.
-    pub fn validate_rtm(
-        &self,
-        n_bands: usize,
-        geometry: crate::rtm::Geometry,
-    ) -> Result<(), Error> {
-        match *self {
-            Effect::Illumination { .. } if geometry == crate::rtm::Geometry::Reference => {
-                Err(Error::InvalidModel(ILLUMINATION_NEEDS_PHYSICAL))
-            }
-            Effect::BandOffset { offset }
-                if offset.0.len() == 4 * n_bands && offset.iter().all(|v| v.abs() < 1.0) =>
-            {
-                Ok(())
-            }
-            Effect::BandOffset { .. } => Err(Error::InvalidModel(
-                "band offsets: one per observed band, finite and below 1 in reflectance",
-            )),
-            Effect::Illumination {
-                lat_deg,
-                lon_deg,
-                utc_hours,
-                view_azimuth_deg,
-            } if (-90.0..=90.0).contains(&lat_deg)
-                && (-180.0..=360.0).contains(&lon_deg)
-                && (0.0..=24.0).contains(&utc_hours)
-                && view_azimuth_deg.is_finite() =>
-            {
-                Ok(())
-            }
-            Effect::Illumination { .. } => Err(Error::InvalidModel(
-                "illumination: latitude, longitude, hour or view azimuth out of range",
-            )),
-            _ => Err(Error::InvalidModel(
-                "RTM models declare only the illumination and band-offset effects",
-            )),
-        }
-    }
-}
-
-/// Why an RTM model in the reference geometry cannot declare the illumination effect.
-pub const ILLUMINATION_NEEDS_PHYSICAL: &str = "the illumination effect needs the physical geometry (the reference geometry hands INFORM cosines where angles are expected)";
-
-/// Adds the [`Effect::BandOffset`]s of `effects` to an RTM model's bands `out` (the others leave
-/// it unchanged).
-pub fn rtm_add_offsets<R: Real>(effects: &[Effect<'_>], out: &mut [R]) -> Result<(), Error> {
-    for e in effects {
-        if let Effect::BandOffset { offset } = *e {
-            if offset.0.len() != 4 * out.len() {
-                return Err(Error::SizeMismatch {
-                    what: "band offsets",
-                    expected: out.len(),
-                    found: offset.0.len() / 4,
-                });
-            }
-            for (o, v) in out.iter_mut().zip(offset.iter()) {
-                *o += R::c(v as f64);
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The fixed INFORM inputs of an observation made on day `t_day`: `fixed` with the sun zenith
-/// `tts` and the relative azimuth `psi` of every [`Effect::Illumination`] in `effects` (the
-/// others leave it unchanged). A sun within 1° of the horizon or below is an error: no forest
-/// spectrum is taken then.
-///
-/// ```
-/// use magic_core::effects::{rtm_fixed_at, Effect};
-/// use magic_core::rtm::Fixed;
-/// let sun = Effect::Illumination { lat_deg: 47.5, lon_deg: 14.5, utc_hours: 10.0, view_azimuth_deg: 0.0 };
-/// let day = magic_core::time::days_from_civil(2018, 10, 30) as f64;
-/// let f = rtm_fixed_at(&[sun], &Fixed::default(), day).unwrap();
-/// assert!(f.tts > 60.0 && f.tts < 66.0); // late October: a low sun, not the paper's 30°
-/// assert_eq!(rtm_fixed_at(&[], &Fixed::default(), day).unwrap(), Fixed::default());
-/// ```
-pub fn rtm_fixed_at(
-    effects: &[Effect<'_>],
-    fixed: &crate::rtm::Fixed,
-    t_day: f64,
-) -> Result<crate::rtm::Fixed, Error> {
-    let mut f = *fixed;
-    for e in effects {
-        if let Effect::Illumination {
-            lat_deg,
-            lon_deg,
-            utc_hours,
-            view_azimuth_deg,
-        } = *e
-        {
-            if !t_day.is_finite() {
-                return Err(Error::OutOfRange {
-                    what: "date (the model has time-dependent effects)",
-                });
-            }
-            let p = crate::sun::position(t_day, utc_hours as f64, lat_deg as f64, lon_deg as f64)?;
-            if p.zenith_deg >= 89.0 {
-                return Err(Error::OutOfRange {
-                    what: "sun zenith of the acquisition (sun at or below the horizon)",
-                });
-            }
-            f.tts = p.zenith_deg;
-            f.psi = crate::sun::relative_azimuth(p.azimuth_deg, view_azimuth_deg as f64);
-        }
-    }
-    Ok(f)
 }
 
 /// `x − ⌊x⌋` in `R`, exactly, by subtracting powers of two (Sterbenz: each subtraction is exact),
@@ -525,6 +294,7 @@ pub fn mogi_with_effects_of<R: Real, N: Network + ?Sized>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::quant::LeF32;
     use crate::Dual;
 
     const NET: [Station; 2] = [
@@ -616,76 +386,6 @@ mod tests {
             offset_mm: [0.0; 3]
         }
         .validate(2)
-        .is_err());
-    }
-
-    #[test]
-    fn illumination_sets_the_sun_of_rtm_models_only() {
-        let sun = Effect::Illumination {
-            lat_deg: 47.5,
-            lon_deg: 14.5,
-            utc_hours: 10.0,
-            view_azimuth_deg: 100.0,
-        };
-        assert!(sun.needs_time() && sun.n_latent() == 0);
-        assert_eq!(sun.family(), "illumination");
-        // Not a GNSS term.
-        assert!(sun.validate(2).is_err());
-        let mut out = [0.0f64; 6];
-        assert!(sun.apply(&NET, &[], 14_000.0, &mut out).is_err());
-        // An RTM term: the sun of the day, relative azimuth to the view.
-        assert!(sun.validate_rtm(11, crate::rtm::Geometry::Physical).is_ok());
-        assert!(Effect::CommonMode
-            .validate_rtm(11, crate::rtm::Geometry::Physical)
-            .is_err());
-        let day = crate::time::days_from_civil(2018, 7, 2) as f64;
-        let f = rtm_fixed_at(&[sun], &crate::rtm::Fixed::default(), day).unwrap();
-        let p = crate::sun::position(day, 10.0, 47.5, 14.5).unwrap();
-        assert_eq!(f.tts, p.zenith_deg);
-        assert_eq!(f.psi, crate::sun::relative_azimuth(p.azimuth_deg, 100.0));
-        assert_eq!(f.sd, crate::rtm::Fixed::default().sd);
-        // Undated spectra, a site off the globe, night: errors.
-        assert!(rtm_fixed_at(&[sun], &crate::rtm::Fixed::default(), f64::NAN).is_err());
-        let night = Effect::Illumination {
-            lat_deg: 47.5,
-            lon_deg: 14.5,
-            utc_hours: 23.0,
-            view_azimuth_deg: 0.0,
-        };
-        assert!(rtm_fixed_at(&[night], &crate::rtm::Fixed::default(), day).is_err());
-        let off = Effect::Illumination {
-            lat_deg: 95.0,
-            lon_deg: 14.5,
-            utc_hours: 10.0,
-            view_azimuth_deg: 0.0,
-        };
-        assert!(off
-            .validate_rtm(11, crate::rtm::Geometry::Physical)
-            .is_err());
-    }
-
-    #[test]
-    fn band_offsets_add_to_rtm_bands() {
-        let mut bytes = [0u8; 8];
-        bytes[..4].copy_from_slice(&0.01f32.to_le_bytes());
-        bytes[4..].copy_from_slice(&(-0.02f32).to_le_bytes());
-        let e = Effect::BandOffset {
-            offset: LeF32(&bytes),
-        };
-        assert!(!e.needs_time() && e.n_latent() == 0 && e.family() == "band_offset");
-        assert!(e.validate_rtm(2, crate::rtm::Geometry::Physical).is_ok());
-        assert!(e.validate_rtm(3, crate::rtm::Geometry::Physical).is_err());
-        assert!(e.validate(2).is_err());
-        let mut out = [0.1f64, 0.2];
-        rtm_add_offsets(&[e], &mut out).unwrap();
-        assert!((out[0] - 0.11).abs() < 1e-8 && (out[1] - 0.18).abs() < 1e-8);
-        assert!(rtm_add_offsets(&[e], &mut [0.0f64; 3]).is_err());
-        let mut big = [0u8; 8];
-        big[..4].copy_from_slice(&2.0f32.to_le_bytes());
-        assert!(Effect::BandOffset {
-            offset: LeF32(&big)
-        }
-        .validate_rtm(2, crate::rtm::Geometry::Physical)
         .is_err());
     }
 }
