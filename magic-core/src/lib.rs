@@ -7,7 +7,9 @@
 //! rebuilds X, and a small correction C absorbs systematic bias: X ≈ C(F(E(X))). The same code runs
 //! on a Cortex-M4F (f32), on the host (f64) and in training (exact derivatives through [`Dual`]).
 //!
-//! * [`real`] — the scalar trait the physics is written against (f32, f64, dual numbers, E1);
+//! * [`real`] — the scalar trait the physics is written against (f32, f64, dual numbers) and the
+//!   numerical functions it needs, one per file with test vectors and a stated error (E1, the
+//!   sine and cosine of a turn, the square root);
 //! * [`mogi`] — the Mogi point source for a GNSS network;
 //! * [`rtm`] — PROSPECT-D, 4SAIL, INFORM and Sentinel-2 band integration;
 //! * [`quant`] and [`nn`] — int8 / f32 dense layers and the MLPs built from them;

@@ -153,18 +153,7 @@ impl Network for Stations<'_> {
     }
 }
 
-/// `√x` in `R`. With the `dsp` feature on ARM (the firmware) the f32 case runs the FPU's
-/// `VSQRT.F32` (bit-identical to libm's correctly rounded `sqrtf`, a software routine there):
-/// `R` is f32 exactly when it is 4 bytes wide (f64 and the dual numbers are wider), and for f32
-/// the conversions through `value` and `c` are identities. Elsewhere `R::sqrt`.
-#[inline(always)]
-pub fn sqrt<R: Real>(x: R) -> R {
-    #[cfg(all(feature = "dsp", target_arch = "arm"))]
-    if core::mem::size_of::<R>() == 4 {
-        return R::c(crate::quant::dsp::sqrt_f32(x.value() as f32) as f64);
-    }
-    x.sqrt()
-}
+pub use crate::real::sqrt::sqrt;
 
 /// Displacement (east, north, up) in mm at one station from a source `p = [x, y, depth, ΔV]`.
 #[inline]

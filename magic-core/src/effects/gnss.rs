@@ -3,9 +3,9 @@
 
 use super::Effect;
 use crate::mogi::{self, Network, Station};
+use crate::real::sin_cos::{fraction, sin_cos_turn};
 use crate::{Error, Real};
 
-const TWO_PI: f64 = core::f64::consts::TAU;
 const YEAR_DAYS: f64 = 365.25;
 
 impl Effect<'_> {
@@ -131,7 +131,7 @@ impl Effect<'_> {
                 }
             }
             Effect::Seasonal { coef } => {
-                // The phase within the year and its sine and cosine, in R (see `sin_cos_turn`;
+                // The phase within the year and its sine and cosine, in R (see [`sin_cos_turn`];
                 // no f64 arithmetic on the board), the semiannual terms by the double-angle
                 // formulas.
                 let (sn, cs) = sin_cos_turn::<R>(fraction(t / R::c(YEAR_DAYS)));
@@ -172,79 +172,6 @@ impl Effect<'_> {
             }
         }
         Ok(())
-    }
-}
-
-/// `x − ⌊x⌋` in `R`, exactly, by subtracting powers of two (Sterbenz: each subtraction is exact),
-/// for |x| < 2³¹: no conversion to an integer, which in f32 would go through f64 (soft-float on
-/// the board).
-fn fraction<R: Real>(x: R) -> R {
-    let neg = x < R::zero();
-    let mut f = if neg { -x } else { x };
-    for k in (0..31).rev() {
-        let p = R::c((1u32 << k) as f64);
-        if f >= p {
-            f -= p;
-        }
-    }
-    if neg && f > R::zero() {
-        R::one() - f
-    } else {
-        f
-    }
-}
-
-/// `sin(2πf)` and `cos(2πf)` for a fraction of a turn `f` in [0, 1), in `R`: the nearest quarter
-/// turn is taken out, and the rest, |x| ≤ π/4, goes through the Taylor series
-/// up to x¹⁷ / x¹⁸ (truncation below 1e-19), evaluated in `R`. No library call: on the board
-/// (`R = f32`) libm's `sinf`/`cosf` would bring their f64 argument reduction (about 3 KB of
-/// flash) for this one term; on the host (`R = f64`) the result is within a few ulps of libm's.
-fn sin_cos_turn<R: Real>(f: R) -> (R, R) {
-    // 1 / ((2k)(2k + 1)), k = 1..=8, and 1 / ((2k − 1)(2k)), k = 1..=9.
-    const S: [f64; 8] = [
-        1.0 / 6.0,
-        1.0 / 20.0,
-        1.0 / 42.0,
-        1.0 / 72.0,
-        1.0 / 110.0,
-        1.0 / 156.0,
-        1.0 / 210.0,
-        1.0 / 272.0,
-    ];
-    const C: [f64; 9] = [
-        1.0 / 2.0,
-        1.0 / 12.0,
-        1.0 / 30.0,
-        1.0 / 56.0,
-        1.0 / 90.0,
-        1.0 / 132.0,
-        1.0 / 182.0,
-        1.0 / 240.0,
-        1.0 / 306.0,
-    ];
-    // The nearest quarter turn, by comparisons (the bounds are exact in binary).
-    let q = [0.125, 0.375, 0.625, 0.875]
-        .iter()
-        .filter(|&&b| f >= R::c(b))
-        .count();
-    let quarter = [0.0, 0.25, 0.5, 0.75, 1.0].get(q).copied().unwrap_or(0.0);
-    let x = R::c(TWO_PI) * (f - R::c(quarter));
-    let x2 = x * x;
-    // Horner on x²: sin x = x (1 − x²/(2·3) (1 − x²/(4·5) (…))), cos x = 1 − x²/(1·2) (…).
-    let mut s = R::one();
-    for &k in S.iter().rev() {
-        s = R::one() - x2 * s * R::c(k);
-    }
-    let mut c = R::one();
-    for &k in C.iter().rev() {
-        c = R::one() - x2 * c * R::c(k);
-    }
-    let s = x * s;
-    match q % 4 {
-        0 => (s, c),
-        1 => (c, -s),
-        2 => (-s, -c),
-        _ => (-c, s),
     }
 }
 
@@ -320,45 +247,6 @@ mod tests {
         // ∂u_E(station 0)/∂t_E = 1, ∂u_U(station 1)/∂k = z − z_ref = 0.15
         assert_eq!(out[0].d[4], 1.0);
         assert!((out[5].d[7] - 0.15).abs() < 1e-6);
-    }
-
-    #[test]
-    fn fractions_of_a_year() {
-        for x in [
-            0.0,
-            0.25,
-            1.0,
-            54.75,
-            54.999_999,
-            -0.25,
-            -1.0,
-            -3.5,
-            1e6 + 0.5,
-            16_777_215.0,
-        ] {
-            assert_eq!(fraction(x), x - libm::floor(x), "{x}");
-            let x32 = x as f32;
-            assert_eq!(fraction(x32), x32 - libm::floorf(x32), "{x}");
-        }
-    }
-
-    #[test]
-    fn seasonal_sine_and_cosine_match_libm() {
-        let mut worst = 0f64;
-        for i in 0..=4000 {
-            let f = i as f64 / 4000.0 * 0.999_999_9;
-            let (s, c) = sin_cos_turn::<f64>(f);
-            let (s32, c32) = sin_cos_turn::<f32>(f as f32);
-            let w = TWO_PI * f;
-            worst = worst
-                .max((s - libm::sin(w)).abs())
-                .max((c - libm::cos(w)).abs());
-            assert!(
-                (s32 as f64 - libm::sin(w)).abs() < 3e-7
-                    && (c32 as f64 - libm::cos(w)).abs() < 3e-7
-            );
-        }
-        assert!(worst < 1e-15, "{worst:e}");
     }
 
     #[test]

@@ -86,7 +86,7 @@ macro_rules! two_groups {
 
 /// The FPU's square root (`VSQRT.F32`, correctly rounded like libm's `sqrtf`, which on this
 /// target is a software routine of about 80 instructions and 480 bytes). Used through
-/// [`crate::mogi::sqrt`].
+/// [`crate::real::sqrt::sqrt`].
 #[inline(always)]
 pub fn sqrt_f32(x: f32) -> f32 {
     let y: u32;
