@@ -31,7 +31,7 @@ pub mod rtm;
 pub mod sun;
 pub mod time;
 
-pub use error::{Error, MessageSink};
+pub use error::{BoundFault, EffectFault, Error, LayerArray, LayerFault, MessageSink, Net};
 pub use real::{Dual, Real};
 pub mod invert;
 pub mod line;

@@ -337,7 +337,7 @@ proptest! {
         let input: Vec<f32> = (0..n_in).map(|i| i as f32 * 0.37 - 20.0).collect();
         let mut output = vec![0f32; if chain { width as usize } else { n_out }];
         let _ = magic_core::nn::run(&layers, &input, &mut output, &mut magic_core::nn::Scratch::default());
-        let _ = magic_core::nn::validate_chain(&layers, n_in, n_out);
+        let _ = magic_core::nn::validate_chain(&layers, n_in, n_out, magic_core::Net::Encoder);
     }
 }
 

@@ -27,6 +27,7 @@ pub use gnss::{mogi_with_effects, mogi_with_effects_of};
 pub use rtm::{rtm_add_offsets, rtm_fixed_at, ILLUMINATION_NEEDS_PHYSICAL};
 
 use crate::quant::LeF32;
+use crate::{EffectFault, Error};
 use serde::{Deserialize, Serialize};
 
 /// Largest number of effects in one model.
@@ -117,6 +118,14 @@ impl Effect<'_> {
                 | Effect::Drift { .. }
                 | Effect::Illumination { .. }
         )
+    }
+
+    /// [`Error::InvalidEffect`] for this effect.
+    pub fn invalid(&self, fault: EffectFault) -> Error {
+        Error::InvalidEffect {
+            family: self.family(),
+            fault,
+        }
     }
 
     /// The family name used in reports.

@@ -3,8 +3,8 @@
 
 use super::Effect;
 use crate::rtm::{Fixed, Geometry};
-use crate::Error;
 use crate::Real;
+use crate::{EffectFault, Error};
 
 impl Effect<'_> {
     /// Checks an effect of an RTM model with `n_bands` observed bands in `geometry`:
@@ -14,16 +14,14 @@ impl Effect<'_> {
     pub fn validate_rtm(&self, n_bands: usize, geometry: Geometry) -> Result<(), Error> {
         match *self {
             Effect::Illumination { .. } if geometry == Geometry::Reference => {
-                Err(Error::InvalidModel(ILLUMINATION_NEEDS_PHYSICAL))
+                Err(self.invalid(EffectFault::NeedsPhysicalGeometry))
             }
             Effect::BandOffset { offset }
                 if offset.0.len() == 4 * n_bands && offset.iter().all(|v| v.abs() < 1.0) =>
             {
                 Ok(())
             }
-            Effect::BandOffset { .. } => Err(Error::InvalidModel(
-                "band offsets: one per observed band, finite and below 1 in reflectance",
-            )),
+            Effect::BandOffset { .. } => Err(self.invalid(EffectFault::Parameters)),
             Effect::Illumination {
                 lat_deg,
                 lon_deg,
@@ -36,17 +34,14 @@ impl Effect<'_> {
             {
                 Ok(())
             }
-            Effect::Illumination { .. } => Err(Error::InvalidModel(
-                "illumination: latitude, longitude, hour or view azimuth out of range",
-            )),
-            _ => Err(Error::InvalidModel(
-                "RTM models declare only the illumination and band-offset effects",
-            )),
+            Effect::Illumination { .. } => Err(self.invalid(EffectFault::Parameters)),
+            _ => Err(self.invalid(EffectFault::NotRtm)),
         }
     }
 }
 
-/// Why an RTM model in the reference geometry cannot declare the illumination effect.
+/// Why an RTM model in the reference geometry cannot declare the illumination effect (the long
+/// form of [`EffectFault::NeedsPhysicalGeometry`]).
 pub const ILLUMINATION_NEEDS_PHYSICAL: &str = "the illumination effect needs the physical geometry (the reference geometry hands INFORM cosines where angles are expected)";
 
 /// Adds the [`Effect::BandOffset`]s of `effects` to an RTM model's bands `out` (the others leave
