@@ -9,7 +9,7 @@ use magic_core::model_file::{Model, MAGIC, VERSION};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::quant::{quantize, requantize};
 use magic_core::{invert, Flags, Real, Variant, Workspace};
-use magic_tests::random_mogi_model;
+use magic_tests::{crc32, random_mogi_model};
 use magic_train::synth;
 use proptest::prelude::*;
 use std::sync::OnceLock;
@@ -183,21 +183,6 @@ proptest! {
         let mut u = vec![0f64; 36];
         prop_assert!(mogi::field(&network(), &[0.0, 0.0, d, 1.0], &mut u).is_err());
     }
-}
-
-fn crc32(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &byte in data {
-        c ^= byte as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                (c >> 1) ^ 0xEDB8_8320
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
 }
 
 /// Deterministic filler bytes for generated layers.

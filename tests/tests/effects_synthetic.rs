@@ -26,8 +26,12 @@ fn check(scenario: Scenario) {
             r,
             a.table()
         );
-        // The analysis of a ~2 000-day split takes seconds, not minutes.
-        assert!(a.seconds < 30.0, "analysis took {:.1} s", a.seconds);
+        // (Its cost is reported, not asserted: `magic synth-check` prints it.)
+        eprintln!(
+            "{} seed {seed}: analysis {:.1} s",
+            scenario.name(),
+            a.seconds
+        );
         if scenario != Scenario::Clean {
             let top = &a.effects[0];
             assert!(

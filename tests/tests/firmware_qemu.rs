@@ -15,26 +15,14 @@
 use magic_core::model_file::{Model, Variant};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::nn::Activation;
+use magic_tests::toolchain_ready;
 use magic_train::export::{OwnedEffect, OwnedLayer, OwnedModel, OwnedWeights};
-use magic_train::qemu::{build_firmware, build_firmware_with, ensure_toolchain, run_firmware};
+use magic_train::qemu::{build_firmware, build_firmware_with, run_firmware};
 use std::path::PathBuf;
 
 const N_STATIONS: usize = 12;
 const N_OBS: usize = 3 * N_STATIONS;
 const TIMEOUT_S: u64 = 120;
-
-/// Whether the QEMU tests can run here; panics (test failure) when the tools are missing unless
-/// `MAGIC_SKIP_QEMU=1`.
-fn toolchain_ready() -> bool {
-    match ensure_toolchain() {
-        Ok(()) => true,
-        Err(e) if std::env::var("MAGIC_SKIP_QEMU").as_deref() == Ok("1") => {
-            eprintln!("notice: skipping the firmware test (MAGIC_SKIP_QEMU=1): {e}");
-            false
-        }
-        Err(e) => panic!("{e:#}\n(set MAGIC_SKIP_QEMU=1 to skip the QEMU tests)"),
-    }
-}
 
 /// A deterministic pseudo-random stream (xorshift64*), uniform in [-1, 1).
 struct Rng(u64);

@@ -15,15 +15,16 @@
 //! `MAGIC_FUZZ_ONLY=<case>` reruns one case. Case `i` is generated from (seed, target, i) alone, so
 //! a failure report (seed, case and input in hex) reproduces exactly. A panic is caught with
 //! `catch_unwind` and reported with its input before the test fails; a case that runs longer than
-//! `MAGIC_FUZZ_CASE_SECS` (default 10 s) is reported as a hang, and the whole run must finish
-//! within a budget that grows with the number of cases.
+//! `MAGIC_FUZZ_CASE_SECS` (default 10 s, 300 times the slowest case measured, 32 ms) is reported
+//! as a hang: a watchdog against non-termination, not a speed requirement (the run's rate and
+//! slowest case are printed).
 //!
 //! The long run: `MAGIC_FUZZ_CASES=1000000 cargo test --release -p magic-tests --test fuzz -- --nocapture`.
 
 use magic_core::line::parse_obs;
 use magic_core::model_file::{Model, MAGIC, VERSION};
 use magic_core::{invert, Variant, Workspace};
-use magic_tests::random_mogi_model;
+use magic_tests::{random_mogi_model, reseal};
 use magic_train::synth;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -149,8 +150,6 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
         .ok()
         .map(|v| v.parse::<u64>().expect("MAGIC_FUZZ_ONLY: a case number"));
     let case_limit = Duration::from_secs(env_u64("MAGIC_FUZZ_CASE_SECS", 10));
-    // Generous: 60 s plus 2 ms per case (the release build runs far faster than that).
-    let budget = Duration::from_secs(60) + Duration::from_millis(2 * cases);
     let progress = Arc::new(AtomicU64::new(0));
     let (tx, rx) = mpsc::channel::<Result<(u64, f64), (u64, Vec<u8>)>>();
     let (g, c, p) = (gen.clone(), check.clone(), progress.clone());
@@ -188,10 +187,6 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
                     slowest * 1e3,
                     seed()
                 );
-                assert!(
-                    start.elapsed() < budget,
-                    "fuzz {name}: run took {secs:.1} s, over the {budget:?} budget"
-                );
                 return;
             }
             Ok(Err((i, input))) => {
@@ -217,10 +212,6 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
                         hex(&input)
                     );
                 }
-                assert!(
-                    start.elapsed() < budget,
-                    "fuzz {name}: not finished within {budget:?} (at case {i})"
-                );
             }
             Err(mpsc::RecvTimeoutError::Disconnected) => {
                 panic!("fuzz {name}: worker ended without a result")
@@ -263,40 +254,6 @@ fn models() -> &'static Models {
             .collect();
         Models { files, decoded }
     })
-}
-
-fn crc32(data: &[u8]) -> u32 {
-    static TABLE: OnceLock<[u32; 256]> = OnceLock::new();
-    let t = TABLE.get_or_init(|| {
-        std::array::from_fn(|i| {
-            let mut c = i as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    (c >> 1) ^ 0xEDB8_8320
-                } else {
-                    c >> 1
-                };
-            }
-            c
-        })
-    });
-    !data.iter().fold(0xFFFF_FFFFu32, |c, &b| {
-        t[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8)
-    })
-}
-
-/// Rewrites the header's body length and the CRC so that decoding gets past both.
-fn reseal(b: &mut [u8], fix_len: bool) {
-    if b.len() < 14 {
-        return;
-    }
-    if fix_len {
-        let body = (b.len() - 14) as u32;
-        b[6..10].copy_from_slice(&body.to_le_bytes());
-    }
-    let n = b.len();
-    let crc = crc32(&b[..n - 4]);
-    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
 }
 
 fn mutate_model(r: &mut Rng) -> Vec<u8> {

@@ -2,7 +2,7 @@
 //! Jacobian held to central differences, and physical invariants checked with proptest.
 //!
 //! Data are found through `MAGIC_DATA` or `../shared/data` next to the workspace; without them the
-//! tests print a notice and pass.
+//! tests fail, saying what to set.
 
 // Index loops over several parallel arrays (bands × variables) read more plainly here.
 #![allow(clippy::needless_range_loop)]
@@ -23,22 +23,6 @@ use std::sync::OnceLock;
 
 // ---------------------------------------------------------------------------------------------
 // Data loading (std only)
-
-fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("MAGIC_DATA") {
-        Some(d) => PathBuf::from(d),
-        None => PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")),
-    };
-    if dir.join("rtm/prospect_d_coefficients.csv").exists() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "notice: RTM data not found at {} (set MAGIC_DATA); skipping",
-            dir.display()
-        );
-        None
-    }
-}
 
 /// A CSV file: header and rows of raw fields.
 struct Csv {
@@ -163,14 +147,14 @@ struct Data {
     tables: OwnedTables,
 }
 
-fn data() -> Option<&'static Data> {
-    static DATA: OnceLock<Option<Data>> = OnceLock::new();
+/// The tables and the oracle outputs (a test failure, saying what to set, without them).
+fn data() -> &'static Data {
+    static DATA: OnceLock<Data> = OnceLock::new();
     DATA.get_or_init(|| {
-        let dir = data_dir()?;
+        let dir = magic_tests::data_with(&["rtm/prospect_d_coefficients.csv", "oracle"]);
         let tables = OwnedTables::load(&dir);
-        Some(Data { dir, tables })
+        Data { dir, tables }
     })
-    .as_ref()
 }
 
 const INPUT_COLS: [&str; N_INPUTS] = [
@@ -198,7 +182,7 @@ fn to_f32(x: &[f64; N_INPUTS]) -> [f32; N_INPUTS] {
 // Reference geometry against the INFORM oracles
 
 fn check_bands_file(file: &str) {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let csv = Csv::read(d.dir.join("oracle").join(file));
     let (mut e64, mut e32) = (0.0f64, 0.0f64);
@@ -241,7 +225,7 @@ fn reference_matches_inform_geometry_2k() {
 
 #[test]
 fn reference_matches_stepwise() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let src = Csv::read(d.dir.join("oracle/rtm_inform_s2_10k.csv"));
     let pro = Csv::read(d.dir.join("oracle/rtm_stepwise_prospect.csv"));
@@ -312,7 +296,7 @@ fn reference_matches_stepwise() {
 
 #[test]
 fn reference_matches_stepwise_scalars() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let src = Csv::read(d.dir.join("oracle/rtm_inform_s2_10k.csv"));
     let sc = Csv::read(d.dir.join("oracle/rtm_stepwise_sail_scalars.csv"));
@@ -391,7 +375,7 @@ fn reference_matches_stepwise_scalars() {
 
 #[test]
 fn physical_sail_matches_prosail() {
-    let Some(d) = data() else { return };
+    let d = data();
     let t = d.tables.tables();
     let coef = t.prospect;
     let n_wl = coef.len();
@@ -502,7 +486,7 @@ fn box_point(u: &[f64; N_LEARNED]) -> [f64; N_LEARNED] {
 
 #[test]
 fn jacobian_matches_central_differences_at_corners_and_centre() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let mut worst = [0.0f64; 2];
     let mut points = vec![[0.5; N_LEARNED]];
@@ -538,7 +522,7 @@ proptest::proptest! {
         u in proptest::array::uniform7(0.0f64..=1.0),
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
         let err = jacobian_error(&model, &box_point(&u), geometry);
@@ -552,7 +536,7 @@ proptest::proptest! {
         high in proptest::bool::ANY,
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let mut u = u;
         u[face] = if high { 1.0 } else { 0.0 };
@@ -611,7 +595,7 @@ proptest::proptest! {
         v in proptest::array::uniform6(0.0f64..1.0),
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
         let x = varied_inputs(&u, &v);
@@ -631,7 +615,7 @@ proptest::proptest! {
         v in proptest::array::uniform6(0.0f64..1.0),
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
         let mut x = varied_inputs(&u, &v);
@@ -684,7 +668,7 @@ proptest::proptest! {
 
 #[test]
 fn bad_inputs_are_errors() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let good = inputs_from_learned(&box_point(&[0.5; N_LEARNED]), &Fixed::default());
     assert!(model.forward(&good, Geometry::Reference).is_ok());
@@ -756,57 +740,4 @@ fn bad_inputs_are_errors() {
             Geometry::Reference
         )
         .is_err());
-}
-
-/// Seconds of CPU time this thread has run (Linux `schedstat`), or wall time elsewhere: on a
-/// shared machine the wall clock also counts time spent waiting for a core.
-fn thread_seconds() -> f64 {
-    static START: OnceLock<std::time::Instant> = OnceLock::new();
-    let start = START.get_or_init(std::time::Instant::now);
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map(|ns| ns * 1e-9)
-        .unwrap_or_else(|| start.elapsed().as_secs_f64())
-}
-
-/// Cost per spectrum in thread CPU time (run with `--ignored --test-threads=1` in release).
-#[test]
-#[ignore]
-fn timing() {
-    let Some(d) = data() else { return };
-    let model = Inform::new(d.tables.tables()).unwrap();
-    let fixed = Fixed::default();
-    let z = box_point(&[0.4; N_LEARNED]);
-    let x = inputs_from_learned(&z, &fixed);
-    let x32 = x.map(|v| v as f32);
-    let mut acc = 0.0;
-    let n = 3000;
-    let t0 = thread_seconds();
-    for k in 0..n {
-        let mut xx = x;
-        xx[1] += k as f64 * 1e-3;
-        acc += model.forward(&xx, Geometry::Reference).unwrap()[3];
-    }
-    let f64_us = (thread_seconds() - t0) / n as f64 * 1e6;
-    let t0 = thread_seconds();
-    for k in 0..n {
-        let mut xx = x32;
-        xx[1] += k as f32 * 1e-3;
-        acc += model.forward(&xx, Geometry::Reference).unwrap()[3] as f64;
-    }
-    let f32_us = (thread_seconds() - t0) / n as f64 * 1e6;
-    let m = 500;
-    let t0 = thread_seconds();
-    for k in 0..m {
-        let mut zz = z;
-        zz[1] += k as f64 * 1e-3;
-        acc += model.jacobian(&zz, &fixed, Geometry::Reference).unwrap().1[3][1];
-    }
-    let jac_us = (thread_seconds() - t0) / m as f64 * 1e6;
-    eprintln!(
-        "timing ({} wavelengths, thread CPU time): forward f64 {f64_us:.1} us, f32 {f32_us:.1} us, \
-         forward + Jacobian {jac_us:.1} us [{acc:.3}]",
-        model.sensor().n_active()
-    );
 }

@@ -3,7 +3,7 @@
 //! `magic forward rtm` against the oracle.
 //!
 //! Data are found through `MAGIC_DATA` or `../shared/data` next to the workspace; without them the
-//! tests print a notice and pass.
+//! tests fail, saying what to set.
 
 use magic_core::model_file::{Model, Problem};
 use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
@@ -16,36 +16,24 @@ use magic_train::OwnedModel;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("MAGIC_DATA") {
-        Some(d) => PathBuf::from(d),
-        None => PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")),
-    };
-    if dir.join("rtm/prospect_d_coefficients.csv").exists() && dir.join("s2/train.csv").exists() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "notice: RTM/S2 data not found at {} (set MAGIC_DATA); skipping",
-            dir.display()
-        );
-        None
-    }
+/// The data folder, with the RTM tables and the Sentinel-2 extract (a test failure without them).
+fn data_dir() -> PathBuf {
+    magic_tests::data_with(&["rtm/prospect_d_coefficients.csv", "s2/train.csv", "oracle"])
 }
 
-fn setup() -> Option<&'static RtmSetup> {
-    static S: OnceLock<Option<RtmSetup>> = OnceLock::new();
+fn setup() -> &'static RtmSetup {
+    static S: OnceLock<RtmSetup> = OnceLock::new();
     S.get_or_init(|| {
-        let d = data_dir()?;
-        Some(RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap())
+        let d = data_dir();
+        RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap()
     })
-    .as_ref()
 }
 
 /// A short training run of B (few hundred spectra, 2 epochs), shared by the tests.
-fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
-    static M: OnceLock<Option<(OwnedModel, Vec<u8>)>> = OnceLock::new();
+fn trained_b() -> &'static (OwnedModel, Vec<u8>) {
+    static M: OnceLock<(OwnedModel, Vec<u8>)> = OnceLock::new();
     M.get_or_init(|| {
-        let s = setup()?;
+        let s = setup();
         let cfg = TrainConfig {
             epochs: 2,
             progress: false,
@@ -61,9 +49,8 @@ fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
             log.best_valid
         );
         let bytes = model.encode().unwrap();
-        Some((model, bytes))
+        (model, bytes)
     })
-    .as_ref()
 }
 
 fn physical(data: &S2Data, row: &[f32]) -> Vec<f32> {
@@ -75,9 +62,7 @@ fn physical(data: &S2Data, row: &[f32]) -> Vec<f32> {
 
 #[test]
 fn short_training_run_of_b_gives_a_valid_small_model() {
-    let Some((model, bytes)) = trained_b() else {
-        return;
-    };
+    let (model, bytes) = trained_b();
     assert_eq!(model.variant, Variant::B);
     assert!(
         bytes.len() <= 256 * 1024,
@@ -87,7 +72,7 @@ fn short_training_run_of_b_gives_a_valid_small_model() {
     let m = Model::decode(bytes).unwrap();
     assert_eq!(m.n_obs(), 11);
     assert_eq!(m.n_params(), N_LEARNED);
-    let s = setup().unwrap();
+    let s = setup();
     let mut ws = Workspace::default();
     for row in s.data.test.rows.x.iter().take(50) {
         let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
@@ -107,13 +92,11 @@ fn short_training_run_of_b_gives_a_valid_small_model() {
 
 #[test]
 fn model_file_round_trip_matches_the_f64_tables() {
-    let Some((_, bytes)) = trained_b() else {
-        return;
-    };
-    let d = data_dir().unwrap();
+    let (_, bytes) = trained_b();
+    let d = data_dir();
     let tables = RtmTables::read(&d.join("rtm")).unwrap();
     let full = tables.inform().unwrap();
-    let s = setup().unwrap();
+    let s = setup();
     let m = Model::decode(bytes).unwrap();
     // Decode → encode again gives the same bytes.
     assert_eq!(&OwnedModel::from_model(&m).encode().unwrap(), bytes);
@@ -146,9 +129,7 @@ fn model_file_round_trip_matches_the_f64_tables() {
 
 #[test]
 fn corrupt_and_inconsistent_rtm_files_are_errors() {
-    let Some((model, bytes)) = trained_b() else {
-        return;
-    };
+    let (model, bytes) = trained_b();
     // Flipped bits anywhere (CRC).
     for i in (0..bytes.len()).step_by(bytes.len() / 97) {
         let mut c = bytes.clone();
@@ -241,7 +222,7 @@ fn corrupt_and_inconsistent_rtm_files_are_errors() {
 
 #[test]
 fn forward_rtm_command_matches_the_oracle() {
-    let Some(d) = data_dir() else { return };
+    let d = data_dir();
     let oracle = d.join("oracle/rtm_inform_s2_10k.csv");
     let text = std::fs::read_to_string(&oracle).unwrap();
     let head: String = text.lines().take(301).map(|l| format!("{l}\n")).collect();
@@ -284,14 +265,11 @@ fn forward_rtm_command_matches_the_oracle() {
 /// agrees with the host's f64 inversion. Skipped when the toolchain or QEMU is missing.
 #[test]
 fn rtm_model_runs_on_the_firmware_under_qemu() {
-    let Some((_, bytes)) = trained_b() else {
-        return;
-    };
-    if let Err(e) = magic_train::qemu::ensure_toolchain() {
-        eprintln!("notice: no firmware toolchain ({e}); skipping");
+    let (_, bytes) = trained_b();
+    if !magic_tests::toolchain_ready() {
         return;
     }
-    let s = setup().unwrap();
+    let s = setup();
     let dir = std::env::temp_dir().join(format!("magic-rtm-fw-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rtm_b.magic");
@@ -355,10 +333,8 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
 /// `invert`, reproduce its Table 3 test MSE and its physics-only MSE.
 #[test]
 fn released_c_weights_reproduce_the_paper_through_our_forward_model() {
-    let Some(s) = setup() else { return };
-    let w = data_dir()
-        .unwrap()
-        .join("oracle/pretrained_rtm_c_weights.json");
+    let s = setup();
+    let w = data_dir().join("oracle/pretrained_rtm_c_weights.json");
     let model = magic_train::rtm_pipeline::released_c(s, &w).unwrap();
     let bytes = model.encode().unwrap();
     let m = Model::decode(&bytes).unwrap();
@@ -414,9 +390,7 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
     use magic_train::rtm_pipeline::s2_illumination;
     use magic_train::rtm_residuals::{analyse_rtm, RtmAnalysisOptions};
     use rand::{Rng, SeedableRng};
-    let Some(d) = data_dir() else {
-        return;
-    };
+    let d = data_dir();
     let mut setup = RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Physical).unwrap();
     let truth = setup
         .physics()
@@ -491,11 +465,8 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
 /// results.
 #[test]
 fn rtm_illumination_model_runs_on_the_firmware() {
-    let Some((model, _)) = trained_b() else {
-        return;
-    };
-    if let Err(e) = magic_train::qemu::ensure_toolchain() {
-        eprintln!("notice: no firmware toolchain ({e}); skipping");
+    let (model, _) = trained_b();
+    if !magic_tests::toolchain_ready() {
         return;
     }
     let mut m = model.clone();
@@ -521,7 +492,7 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     for (b, (w, o)) in with.iter().zip(&without).enumerate() {
         assert!((w - o - (0.002 * b as f64 - 0.01)).abs() < 1e-7, "band {b}");
     }
-    let s = setup().unwrap();
+    let s = setup();
     let dir = std::env::temp_dir().join(format!("magic-rtm-ill-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rtm_ill.magic");
