@@ -16,6 +16,30 @@ use magic_train::OwnedModel;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+// Tolerances: the measured difference (printed by `-- --nocapture`) times 10, rounded up, unless
+// stated otherwise.
+
+/// How far an inverted variable may sit outside its bound, relative to the bound (f64 path; the
+/// sigmoid maps into the bounds): measured 0; the rounding of `min + (max − min) · u`.
+const BOUND_SLACK_REL: f64 = 4.0 * f64::EPSILON;
+/// Crown diameter and height derived from fc against the paper's eqs. 7–8 written out here,
+/// relative: measured 0 (the same operations); a few ulps.
+const CROWN_MAX_REL_ERROR: f64 = 4.0 * f64::EPSILON;
+/// The model file's f32 table rows against the f64 tables (band reflectance): measured 3.5e-9.
+const F32_ROWS_MAX_ERROR: f64 = 4e-8;
+/// The f32 inversion's reconstruction against the f64 one (reflectance): measured 6.1e-8.
+const F32_RECON_MAX_ERROR: f64 = 7e-7;
+/// `magic forward rtm` against the oracle file: measured 3.0e-14.
+const CLI_FORWARD_MAX_ERROR: f64 = 4e-13;
+/// The board's variables (printed with 6 decimals) against the host's, relative to
+/// max(|host|, 0.01): measured 3.9e-5 and 3.7e-5 (f32 INFORM and the printing).
+const BOARD_MAX_REL_ERROR: f64 = 4e-4;
+/// The board's residual RMS against the host's (reflectance): measured 4.8e-7 and 4.2e-7.
+const BOARD_RESIDUAL_MAX_ERROR: f64 = 5e-6;
+/// Band offsets added to INFORM's bands against the declared offsets (f32 in the file):
+/// measured 1.6e-9.
+const OFFSET_MAX_ERROR: f64 = 2e-8;
+
 /// The data folder, with the RTM tables and the Sentinel-2 extract (a test failure without them).
 fn data_dir() -> PathBuf {
     magic_tests::data_with(&["rtm/prospect_d_coefficients.csv", "s2/train.csv", "oracle"])
@@ -74,20 +98,34 @@ fn short_training_run_of_b_gives_a_valid_small_model() {
     assert_eq!(m.n_params(), N_LEARNED);
     let s = setup();
     let mut ws = Workspace::default();
+    let (mut outside, mut crown) = (0f64, 0f64);
     for row in s.data.test.rows.x.iter().take(50) {
         let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
         // 7 learned variables, then cd and h.
         assert_eq!(inv.n_params, N_LEARNED + 2);
         for (j, b) in m.bounds.iter().enumerate() {
-            assert!(inv.params[j] >= b[0] as f64 - 1e-6 && inv.params[j] <= b[1] as f64 + 1e-6);
+            let out = (b[0] as f64 - inv.params[j]).max(inv.params[j] - b[1] as f64);
+            outside = outside.max(out);
+            let slack = BOUND_SLACK_REL * b[0].abs().max(b[1].abs()) as f64;
+            assert!(
+                out <= slack,
+                "variable {j}: {} outside {b:?}",
+                inv.params[j]
+            );
         }
         let (cd, h) = (inv.params[7], inv.params[8]);
         let want_cd = 2.0 * (inv.params[6] * 1e4 / (std::f64::consts::PI * 500.0)).sqrt();
-        assert!((cd - want_cd).abs() < 1e-9 && (h - (2.117 + 0.507 * cd.ln()).exp()).abs() < 1e-9);
+        let want_h = (2.117 + 0.507 * cd.ln()).exp();
+        let err = ((cd - want_cd) / want_cd)
+            .abs()
+            .max(((h - want_h) / want_h).abs());
+        crown = crown.max(err);
+        assert!(err <= CROWN_MAX_REL_ERROR, "cd {cd}, h {h}: {err:e}");
         assert!(inv.recon[..11]
             .iter()
             .all(|v| v.is_finite() && *v > 0.0 && *v < 1.0));
     }
+    eprintln!("RTM B: largest excursion outside a bound {outside:.2e}, crown formulas {crown:.2e}");
 }
 
 #[test]
@@ -112,19 +150,28 @@ fn model_file_round_trip_matches_the_f64_tables() {
             worst = worst.max((inv.recon[k] - y[b]).abs());
         }
     }
-    assert!(worst < 1e-4, "f32 table rows vs f64 tables: {worst}");
+    assert!(
+        worst <= F32_ROWS_MAX_ERROR,
+        "f32 table rows vs f64 tables: {worst}"
+    );
     // f32 physics on the board's path agrees too.
     let row = physical(&s.data, &s.data.test.rows.x[0]);
     let a = invert::<f64>(&m, &row, &mut ws).unwrap();
     let b = invert::<f32>(&m, &row, &mut ws).unwrap();
+    let mut recon = 0f64;
     for k in 0..11 {
+        let d = (a.recon[k] - b.recon[k] as f64).abs();
+        recon = recon.max(d);
         assert!(
-            (a.recon[k] - b.recon[k] as f64).abs() < 1e-4,
+            d <= F32_RECON_MAX_ERROR,
             "band {k}: {} vs {}",
             a.recon[k],
             b.recon[k]
         );
     }
+    eprintln!(
+        "RTM model file: f32 rows vs f64 tables {worst:.2e}, f32 vs f64 reconstruction {recon:.2e}"
+    );
 }
 
 #[test]
@@ -257,8 +304,28 @@ fn forward_rtm_command_matches_the_oracle() {
             worst = worst.max((a - e).abs());
         }
     }
-    assert!(worst < 1e-10, "forward rtm vs oracle: {worst}");
+    eprintln!("forward rtm vs oracle: {worst:.2e}");
+    assert!(
+        worst <= CLI_FORWARD_MAX_ERROR,
+        "forward rtm vs oracle: {worst}"
+    );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The board's variables (`got`, a result line parsed) against the host's inversion, relative to
+/// max(|host|, 0.01); returns the largest difference.
+fn board_agrees(got: &[f64], inv: &magic_core::Inversion<f64>, line: &str) -> f64 {
+    let mut worst = 0f64;
+    for j in 0..inv.n_params {
+        let (a, e) = (got[j], inv.params[j]);
+        let rel = (a - e).abs() / e.abs().max(1e-2);
+        worst = worst.max(rel);
+        assert!(
+            rel <= BOARD_MAX_REL_ERROR,
+            "{line}: variable {j}: board {a}, host {e}"
+        );
+    }
+    worst
 }
 
 /// The RTM model on the Cortex-M4F under QEMU (f32 physics from the model file's f32 rows)
@@ -299,29 +366,25 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
     assert_eq!(run.results.len(), rows.len());
     let m = Model::decode(bytes).unwrap();
     let mut ws = Workspace::default();
-    let mut worst_res = 0f64;
+    let (mut worst_res, mut worst_var) = (0f64, 0f64);
     for (row, line) in rows.iter().zip(&run.results) {
         let inv = invert::<f64>(&m, row, &mut ws).unwrap();
         let got: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
         assert_eq!(got.len(), inv.n_params + 3, "{line}");
-        for j in 0..inv.n_params {
-            let (a, e) = (got[j], inv.params[j]);
-            assert!(
-                (a - e).abs() <= 1e-3 * e.abs().max(1e-2),
-                "variable {j}: board {a}, host {e}"
-            );
-        }
+        worst_var = worst_var.max(board_agrees(&got, &inv, line));
         // The residual RMS (reflectance) of the board's f32 INFORM reconstruction against the
         // host's f64 one: it differs by at most the largest difference of the reconstructions.
         let res = got[inv.n_params];
         worst_res = worst_res.max((res - inv.residual_rms).abs());
         assert!(
-            (res - inv.residual_rms).abs() <= 1e-4,
+            (res - inv.residual_rms).abs() <= BOARD_RESIDUAL_MAX_ERROR,
             "residual: board {res}, host {}",
             inv.residual_rms
         );
     }
-    eprintln!("RTM residual RMS, board vs host: largest difference {worst_res:.2e}");
+    eprintln!(
+        "RTM board vs host: variables {worst_var:.2e} (relative), residual RMS {worst_res:.2e}"
+    );
     eprintln!(
         "RTM on the board: {:?} instructions per inversion, stack {:?} bytes, flash {:?} bytes",
         run.instructions_per_inversion, run.stack_bytes, run.flash_bytes
@@ -341,11 +404,12 @@ fn released_c_weights_reproduce_the_paper_through_our_forward_model() {
     let r = magic_train::rtm_pipeline::evaluate_par(&m, &s.data.test.rows, "test").unwrap();
     let p = r.physics_mse.unwrap();
     eprintln!(
-        "released C through our F: test MSE {:.4}, physics-only {p:.4}",
+        "released C through our F: test MSE {:.6}, physics-only {p:.6}",
         r.mse
     );
-    assert!((r.mse - 0.0217).abs() < 1e-3, "test MSE {}", r.mse);
-    assert!((p - 1.04).abs() < 0.02, "physics-only MSE {p}");
+    // The paper prints 0.0217 and 1.04 (Table 3): ours must round to the same digits.
+    assert!((r.mse - 0.0217).abs() <= 0.5e-4, "test MSE {}", r.mse);
+    assert!((p - 1.04).abs() <= 0.5e-2, "physics-only MSE {p}");
 }
 
 /// The S2 reader names the file, line and column of a bad cell, and finds bands by prefix.
@@ -489,8 +553,11 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     let mut plain = decoded.clone();
     plain.effects.truncate(1);
     magic_core::invert::forward::<f64>(&plain, &z, 17_700.0, &mut without).unwrap();
+    let mut off = 0f64;
     for (b, (w, o)) in with.iter().zip(&without).enumerate() {
-        assert!((w - o - (0.002 * b as f64 - 0.01)).abs() < 1e-7, "band {b}");
+        let d = (w - o - (0.002 * b as f64 - 0.01)).abs();
+        off = off.max(d);
+        assert!(d <= OFFSET_MAX_ERROR, "band {b}: {d:e}");
     }
     let s = setup();
     let dir = std::env::temp_dir().join(format!("magic-rtm-ill-{}", std::process::id()));
@@ -516,20 +583,21 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     assert!(run.success, "firmware failed: {}", run.stderr);
     assert_eq!(run.results.len(), lines.len());
     let mut ws = Workspace::default();
+    let (mut worst_var, mut worst_res) = (0f64, 0f64);
     for (line, got) in lines.iter().zip(&run.results) {
         let mut obs = vec![0f32; 11];
         let day = magic_core::line::parse_record(line, true, &mut obs).unwrap();
         let inv = magic_core::invert_at::<f64>(&decoded, &obs, day, &mut ws).unwrap();
         let got: Vec<f64> = got.split(',').map(|f| f.parse().unwrap()).collect();
         assert_eq!(got.len(), inv.n_params + 3);
-        for j in 0..inv.n_params {
-            let (a, e) = (got[j], inv.params[j]);
-            assert!(
-                (a - e).abs() <= 1e-3 * e.abs().max(1e-2),
-                "{line}: variable {j}: board {a}, host {e}"
-            );
-        }
-        assert!((got[inv.n_params] - inv.residual_rms).abs() <= 1e-4);
+        worst_var = worst_var.max(board_agrees(&got, &inv, line));
+        let res = (got[inv.n_params] - inv.residual_rms).abs();
+        worst_res = worst_res.max(res);
+        assert!(res <= BOARD_RESIDUAL_MAX_ERROR, "{line}: residual {res:e}");
     }
+    eprintln!(
+        "RTM illumination model, board vs host: variables {worst_var:.2e} (relative), residual RMS \
+         {worst_res:.2e}; band offsets {off:.2e}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
