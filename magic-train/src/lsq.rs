@@ -861,7 +861,7 @@ mod tests {
     }
 
     #[test]
-    fn degenerate_inputs_are_errors() {
+    fn wrong_sizes_and_non_finite_inputs_are_errors() {
         let sc = [1.0; 36];
         let y = synth(&[], &[1.0, 1.0, 6.0, 1.0]);
         let pb = Problem {
@@ -919,6 +919,20 @@ mod tests {
         assert!(fit(&Problem { scale: &nsc, ..pb }, &y, f64::NAN, &start, &o).is_err());
         nsc[5] = 0.0;
         assert!(fit(&Problem { scale: &nsc, ..pb }, &y, f64::NAN, &start, &o).is_err());
+    }
+
+    #[test]
+    fn bad_bounds_sparse_data_bad_grids_and_undated_effects_are_errors() {
+        let sc = [1.0; 36];
+        let y = synth(&[], &[1.0, 1.0, 6.0, 1.0]);
+        let pb = Problem {
+            stations: &NET,
+            effects: &[],
+            bounds: &PAPER_BOUNDS,
+            scale: &sc,
+        };
+        let o = Options::default();
+        let start = [0.0, 0.0, 5.0, 0.0];
         // Bounds: inverted, non-finite, depth not positive.
         let mut b = PAPER_BOUNDS;
         b[0] = [1.0, -1.0];

@@ -207,10 +207,15 @@ fn variables_agree(
     inv: &magic_core::Inversion<f64>,
 ) -> f64 {
     assert_eq!(fields.len(), inv.n_params + 3, "{}", fields.join(","));
+    assert_eq!(model.bounds.len(), inv.n_params, "one bound per variable");
     let mut worst = 0f64;
-    for j in 0..inv.n_params {
-        let fw: f64 = fields[j].parse().unwrap();
-        let [lo, hi] = model.bounds[j];
+    for (j, (field, [lo, hi])) in fields
+        .iter()
+        .zip(&model.bounds)
+        .take(inv.n_params)
+        .enumerate()
+    {
+        let fw: f64 = field.parse().unwrap();
         let rel = (fw - inv.params[j]).abs() / (hi - lo) as f64;
         worst = worst.max(rel);
         assert!(

@@ -256,23 +256,12 @@ fn models() -> &'static Models {
     })
 }
 
+/// A mutated model file: one case in 16 random bytes (half behind a valid header), otherwise
+/// one of the valid files with 1 to 6 edits, most resealed.
 fn mutate_model(r: &mut Rng) -> Vec<u8> {
     let m = models();
     if r.chance(1, 16) {
-        // Random bytes, half of them behind a valid header.
-        let max = if r.chance(1, 2) { 64 } else { 4096 };
-        let n = r.below(max);
-        let mut b: Vec<u8> = (0..n).map(|_| r.byte()).collect();
-        if r.chance(1, 2) {
-            let mut h = MAGIC.to_vec();
-            h.extend(VERSION.to_le_bytes());
-            h.extend((n as u32).to_le_bytes());
-            h.extend(b);
-            b = h;
-            b.extend([0; 4]);
-            reseal(&mut b, false);
-        }
-        return b;
+        return random_file(r);
     }
     // Three cases in four mutate the int8 C model, the rest any of the four.
     let pool = if r.chance(3, 4) { 1 } else { m.files.len() };
@@ -280,102 +269,127 @@ fn mutate_model(r: &mut Rng) -> Vec<u8> {
     let mut b = m.files[src].clone();
     let mut structural = false;
     for _ in 0..1 + r.below(6) {
-        let n = b.len();
-        match r.below(10) {
-            0 | 1 => {
-                let i = r.below(n.max(1));
-                if let Some(x) = b.get_mut(i) {
-                    *x ^= 1 << r.below(8);
-                }
-            }
-            2 | 3 => {
-                const SET: [u8; 8] = [0, 1, 0x7F, 0x80, 0xFF, 0xFE, 0x40, 0x3F];
-                let i = r.below(n.max(1));
-                let v = if r.chance(1, 2) {
-                    SET[r.below(8)]
-                } else {
-                    r.byte()
-                };
-                if let Some(x) = b.get_mut(i) {
-                    *x = v;
-                }
-            }
-            4 => {
-                b.truncate(r.below(n + 1));
-                structural = true;
-            }
-            5 => {
-                // Splice a chunk of another (or the same) model file over or into this one.
-                let other = &m.files[r.below(m.files.len())];
-                let a = r.below(other.len());
-                let len = r.below(64.min(other.len() - a) + 1);
-                let chunk = other[a..a + len].to_vec();
-                let at = r.below(n + 1);
-                if r.chance(1, 2) {
-                    b.splice(at..at, chunk);
-                    structural = true;
-                } else {
-                    for (k, c) in chunk.into_iter().enumerate() {
-                        if let Some(x) = b.get_mut(at + k) {
-                            *x = c;
-                        }
-                    }
-                }
-            }
-            6 => {
-                let at = r.below(n + 1);
-                let ins: Vec<u8> = (0..1 + r.below(16)).map(|_| r.byte()).collect();
-                b.splice(at..at, ins);
-                structural = true;
-            }
-            7 => {
-                let at = r.below(n + 1);
-                let end = (at + 1 + r.below(16)).min(n);
-                b.drain(at..end);
-                structural = true;
-            }
-            8 => {
-                // A little-endian word (a length, a count, a float) set to something extreme.
-                const WORDS: [u32; 8] = [
-                    0,
-                    1,
-                    0xFFFF_FFFF,
-                    0x7FFF_FFFF,
-                    0x8000_0000,
-                    0x7F80_0000,
-                    0x7FC0_0000,
-                    0x0000_0001,
-                ];
-                let w = if r.chance(1, 2) {
-                    WORDS[r.below(8)]
-                } else {
-                    r.next() as u32
-                };
-                let at = r.below(n.max(4) - 3);
-                for (k, x) in w.to_le_bytes().into_iter().enumerate() {
-                    if let Some(y) = b.get_mut(at + k) {
-                        *y = x;
-                    }
-                }
-            }
-            _ => {
-                // The header: version or body length.
-                if n >= 10 {
-                    let i = 4 + r.below(6);
-                    b[i] = if r.chance(1, 2) {
-                        r.byte()
-                    } else {
-                        b[i].wrapping_add(1)
-                    };
-                }
-            }
-        }
+        structural |= edit(r, &mut b, &m.files);
     }
     // Most cases get a valid CRC (and usually a consistent length) so decoding goes deeper.
     if r.chance(7, 8) {
         reseal(&mut b, structural && r.chance(7, 8));
     }
     b
+}
+
+/// Random bytes, half of them behind a valid header.
+fn random_file(r: &mut Rng) -> Vec<u8> {
+    let max = if r.chance(1, 2) { 64 } else { 4096 };
+    let n = r.below(max);
+    let mut b: Vec<u8> = (0..n).map(|_| r.byte()).collect();
+    if r.chance(1, 2) {
+        let mut h = MAGIC.to_vec();
+        h.extend(VERSION.to_le_bytes());
+        h.extend((n as u32).to_le_bytes());
+        h.extend(b);
+        b = h;
+        b.extend([0; 4]);
+        reseal(&mut b, false);
+    }
+    b
+}
+
+/// One random edit of `b` (bit flip, byte set, truncation, splice from `files`, insertion,
+/// deletion, extreme word, header byte); whether it changed the length.
+fn edit(r: &mut Rng, b: &mut Vec<u8>, files: &[Vec<u8>]) -> bool {
+    let mut structural = false;
+    let n = b.len();
+    match r.below(10) {
+        0 | 1 => {
+            let i = r.below(n.max(1));
+            if let Some(x) = b.get_mut(i) {
+                *x ^= 1 << r.below(8);
+            }
+        }
+        2 | 3 => {
+            const SET: [u8; 8] = [0, 1, 0x7F, 0x80, 0xFF, 0xFE, 0x40, 0x3F];
+            let i = r.below(n.max(1));
+            let v = if r.chance(1, 2) {
+                SET[r.below(8)]
+            } else {
+                r.byte()
+            };
+            if let Some(x) = b.get_mut(i) {
+                *x = v;
+            }
+        }
+        4 => {
+            b.truncate(r.below(n + 1));
+            structural = true;
+        }
+        5 => {
+            // Splice a chunk of another (or the same) model file over or into this one.
+            let other = &files[r.below(files.len())];
+            let a = r.below(other.len());
+            let len = r.below(64.min(other.len() - a) + 1);
+            let chunk = other[a..a + len].to_vec();
+            let at = r.below(n + 1);
+            if r.chance(1, 2) {
+                b.splice(at..at, chunk);
+                structural = true;
+            } else {
+                for (k, c) in chunk.into_iter().enumerate() {
+                    if let Some(x) = b.get_mut(at + k) {
+                        *x = c;
+                    }
+                }
+            }
+        }
+        6 => {
+            let at = r.below(n + 1);
+            let ins: Vec<u8> = (0..1 + r.below(16)).map(|_| r.byte()).collect();
+            b.splice(at..at, ins);
+            structural = true;
+        }
+        7 => {
+            let at = r.below(n + 1);
+            let end = (at + 1 + r.below(16)).min(n);
+            b.drain(at..end);
+            structural = true;
+        }
+        8 => {
+            // A little-endian word (a length, a count, a float) set to something extreme.
+            const WORDS: [u32; 8] = [
+                0,
+                1,
+                0xFFFF_FFFF,
+                0x7FFF_FFFF,
+                0x8000_0000,
+                0x7F80_0000,
+                0x7FC0_0000,
+                0x0000_0001,
+            ];
+            let w = if r.chance(1, 2) {
+                WORDS[r.below(8)]
+            } else {
+                r.next() as u32
+            };
+            let at = r.below(n.max(4) - 3);
+            for (k, x) in w.to_le_bytes().into_iter().enumerate() {
+                if let Some(y) = b.get_mut(at + k) {
+                    *y = x;
+                }
+            }
+        }
+        _ => {
+            // The header: version or body length.
+            if n >= 10 {
+                let i = 4 + r.below(6);
+                b[i] = if r.chance(1, 2) {
+                    r.byte()
+                } else {
+                    b[i].wrapping_add(1)
+                };
+            }
+        }
+    }
+    structural
 }
 
 /// A few observation vectors for a model, derived from the input bytes.

@@ -316,8 +316,7 @@ fn forward_rtm_command_matches_the_oracle() {
 /// max(|host|, 0.01); returns the largest difference.
 fn board_agrees(got: &[f64], inv: &magic_core::Inversion<f64>, line: &str) -> f64 {
     let mut worst = 0f64;
-    for j in 0..inv.n_params {
-        let (a, e) = (got[j], inv.params[j]);
+    for (j, (&a, &e)) in got.iter().zip(&inv.params[..inv.n_params]).enumerate() {
         let rel = (a - e).abs() / e.abs().max(1e-2);
         worst = worst.max(rel);
         assert!(

@@ -125,6 +125,65 @@ struct Written {
 }
 
 /// Writes one file per station; returns what the reader must report.
+/// Station `s`'s position on day `t` as NGL writes it: integer metres and a fraction, the known
+/// displacement `u` (mm) added to a base position. AKLV's fraction has drifted past 10 m; NGL
+/// moves 10 m into the integer part on day 15 (east) and day 25 (up), the position unchanged.
+fn position(name: &str, s: usize, t: i64, u: &[Vec<f64>]) -> ([i64; 3], [f64; 3]) {
+    let mut int = [
+        -7000 - 500 * s as i64,
+        6_000_000 + 1000 * s as i64,
+        300 + 10 * s as i64,
+    ];
+    let base_frac = [0.25, 0.5, 0.125];
+    let mut frac: [f64; 3] =
+        std::array::from_fn(|k| base_frac[k] + u[t as usize][k * 12 + s] / 1000.0);
+    if name == "AKLV" {
+        frac[0] += 9.9;
+        frac[2] -= 9.95;
+        if t >= 15 {
+            int[0] += 10;
+            frac[0] -= 10.0;
+        }
+        if t >= 25 {
+            int[2] -= 10;
+            frac[2] += 10.0;
+        }
+    }
+    (int, frac)
+}
+
+/// AV06's bad lines: spoils the fields `g` of day `t` (position `int`, day number `day`) and
+/// returns the 1-based field the reader must name (99: the field count), or 0 for a good line.
+fn spoil_av06(t: i64, g: &mut Vec<String>, int: [i64; 3], day: i64) -> usize {
+    match t {
+        4 => {
+            g[10] = "0.12x4".into(); // `_north(m)` not a number
+            11
+        }
+        6 => {
+            g.pop(); // 22 fields
+            99
+        }
+        8 => {
+            g[16] = "inf".into(); // `sig_u(m)`
+            17
+        }
+        9 => {
+            g[11] = (int[2] + 800).to_string(); // `u0(m)` corrupt: 800 m up
+            13
+        }
+        12 => {
+            g[3] = (day + MJD_1970 - 1).to_string(); // MJD disagrees with YYMMMDD
+            4
+        }
+        16 => {
+            g.push("extra".into()); // 24 fields
+            24
+        }
+        _ => 0,
+    }
+}
+
 fn write_network(dir: &Path, u: &[Vec<f64>]) -> Written {
     let mut bad = Vec::new();
     let mut missing = BTreeSet::new();
@@ -141,12 +200,6 @@ fn write_network(dir: &Path, u: &[Vec<f64>]) -> Written {
         let mut bad_here = |lines: &Vec<String>, line: &str, field: usize| {
             bad.push((file.clone(), lines.len() + 1, column(line, field)));
         };
-        let base_int = [
-            -7000 - 500 * s as i64,
-            6_000_000 + 1000 * s as i64,
-            300 + 10 * s as i64,
-        ];
-        let base_frac = [0.25, 0.5, 0.125];
         let mut delayed: Option<String> = None;
         for t in 0..N_DAYS {
             let day = day0() + t;
@@ -157,23 +210,7 @@ fn write_network(dir: &Path, u: &[Vec<f64>]) -> Written {
                 missing.insert((s, t));
                 continue;
             }
-            let mut int = base_int;
-            let mut frac: [f64; 3] =
-                std::array::from_fn(|k| base_frac[k] + u[t as usize][k * 12 + s] / 1000.0);
-            if name == "AKLV" {
-                // The fraction has drifted past 10 m; NGL moves 10 m into the integer part on day 15
-                // (east) and day 25 (up). The position is unchanged.
-                frac[0] += 9.9;
-                frac[2] -= 9.95;
-                if t >= 15 {
-                    int[0] += 10;
-                    frac[0] -= 10.0;
-                }
-                if t >= 25 {
-                    int[2] -= 10;
-                    frac[2] += 10.0;
-                }
-            }
+            let (int, frac) = position(name, s, t, u);
             let sig = if name == "AKRB" && (10..14).contains(&t) {
                 [9.99999; 3]
             } else {
@@ -186,33 +223,7 @@ fn write_network(dir: &Path, u: &[Vec<f64>]) -> Written {
             let good = f.join(sep);
             if name == "AV06" {
                 let mut g = f.clone();
-                let field = match t {
-                    4 => {
-                        g[10] = "0.12x4".into(); // `_north(m)` not a number
-                        11
-                    }
-                    6 => {
-                        g.pop(); // 22 fields
-                        99
-                    }
-                    8 => {
-                        g[16] = "inf".into(); // `sig_u(m)`
-                        17
-                    }
-                    9 => {
-                        g[11] = (int[2] + 800).to_string(); // `u0(m)` corrupt: 800 m up
-                        13
-                    }
-                    12 => {
-                        g[3] = (day + MJD_1970 - 1).to_string(); // MJD disagrees with YYMMMDD
-                        4
-                    }
-                    16 => {
-                        g.push("extra".into()); // 24 fields
-                        24
-                    }
-                    _ => 0,
-                };
+                let field = spoil_av06(t, &mut g, int, day);
                 if field > 0 {
                     let l = g.join(sep);
                     bad_here(&lines, &l, field);
