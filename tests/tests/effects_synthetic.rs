@@ -10,6 +10,13 @@ use magic_train::gnss::recovery::check_one;
 use magic_train::gnss::synth::{self, Scenario};
 use magic_train::{AnalysisOptions, OwnedEffect, TrainConfig};
 
+/// The step offset in the analysis report (JSON) against the effect's f32 offset (mm): the report
+/// rounds to 3 decimals (±5e-4 mm), the effect holds f32; measured 2.5e-4.
+const REPORTED_OFFSET_MAX_ERROR_MM: f64 = 5.1e-4;
+/// F with the step after its epoch minus before against the declared offset (mm): measured 0; the
+/// rounding of adding it to displacements of ~100 mm (an ulp is 1.4e-14 mm) allowed.
+const APPLIED_OFFSET_MAX_ERROR_MM: f64 = 1e-12;
+
 fn check(scenario: Scenario) {
     let cfg = TrainConfig {
         epochs: 15,
@@ -25,6 +32,12 @@ fn check(scenario: Scenario) {
             r.detail,
             r,
             a.table()
+        );
+        // (Its cost is reported, not asserted: `magic synth-check` prints it.)
+        eprintln!(
+            "{} seed {seed}: analysis {:.1} s",
+            scenario.name(),
+            a.seconds
         );
         if scenario != Scenario::Clean {
             let top = &a.effects[0];
@@ -99,8 +112,11 @@ fn fitted_effect_reproduces_the_fit() {
     );
     let e = magic_core::time::parse_date(params["epoch"].as_str().unwrap()).unwrap() as f32;
     assert_eq!(e, epoch_day);
-    for k in 0..3 {
-        assert!((params["offset_mm"][k].as_f64().unwrap() - offset_mm[k] as f64).abs() < 1e-3);
+    let mut reported = 0f64;
+    for (k, &off) in offset_mm.iter().enumerate() {
+        let d = (params["offset_mm"][k].as_f64().unwrap() - off as f64).abs();
+        reported = reported.max(d);
+        assert!(d <= REPORTED_OFFSET_MAX_ERROR_MM, "component {k}: {d:e}");
     }
     let core = OwnedEffect::Step {
         station,
@@ -113,8 +129,14 @@ fn fitted_effect_reproduces_the_fit() {
     core.apply(st, &[], epoch_day as f64 - 1.0, &mut before)
         .unwrap();
     core.apply(st, &[], epoch_day as f64, &mut after).unwrap();
-    for k in 0..3 {
+    let mut applied = 0f64;
+    for (k, &off) in offset_mm.iter().enumerate() {
         let c = k * 12 + station as usize;
-        assert!((after[c] - before[c] - offset_mm[k] as f64).abs() < 1e-4);
+        let d = (after[c] - before[c] - off as f64).abs();
+        applied = applied.max(d);
+        assert!(d <= APPLIED_OFFSET_MAX_ERROR_MM, "component {k}: {d:e}");
     }
+    eprintln!(
+        "step offset: report vs effect {reported:.2e} mm, applied vs declared {applied:.2e} mm"
+    );
 }

@@ -18,6 +18,8 @@
 mod dual;
 mod e1;
 pub mod lanes;
+pub mod sin_cos;
+pub mod sqrt;
 
 pub use dual::Dual;
 pub use e1::{e1_f64, e1_with_exp, E1_MAX_REL_ERROR};

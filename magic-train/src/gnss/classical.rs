@@ -1,5 +1,5 @@
 //! The classical baseline on a GNSS split (`magic classical`): every day is fitted on its own by
-//! nonlinear least squares ([`magic_core::lsq`]: Levenberg–Marquardt with the exact Jacobian,
+//! nonlinear least squares ([`crate::lsq`]: Levenberg–Marquardt with the exact Jacobian,
 //! multi-start from a coarse grid over the bounds), with no encoder and no correction.
 //!
 //! This is the best any per-day Mogi inversion (model B) can do on the paper's metric: the MSE it
@@ -13,9 +13,9 @@ use crate::data::{day_number, SplitName};
 use crate::model::OwnedEffect;
 use crate::numerics::median;
 use crate::problem::Metric;
+use super::lsq::{self, Grid, Options, Problem};
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::effects::{mogi_with_effects, Effect};
-use magic_core::lsq::{self, Grid, Options, Problem};
 use magic_core::mogi::{PAPER_BOUNDS, PARAM_NAMES};
 use rayon::prelude::*;
 use serde::Serialize;

@@ -6,6 +6,7 @@
 pub mod classical;
 pub mod data;
 pub mod families;
+pub mod lsq;
 pub mod missing;
 pub mod physics;
 pub mod plausibility;
