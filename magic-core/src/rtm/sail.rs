@@ -36,7 +36,7 @@
 //! (`tsstoo = tss·too`).
 
 use super::prospect::LeafOptics;
-use crate::real::Real;
+use crate::real::{Cmp, Real};
 use crate::Error;
 use core::f64::consts::{FRAC_PI_2, PI};
 
@@ -314,7 +314,7 @@ impl<R: Copy> Extinction<R> {
 /// at the hotspot and at exact zeros.
 #[inline]
 pub(crate) fn sqrt0<R: Real>(x: R) -> R {
-    x.select(|v| v > 0.0, || x.sqrt(), R::zero)
+    x.select(Cmp::Gt(0.0), || x.sqrt(), R::zero)
 }
 
 /// `sqrt(tan²a + tan²b − 2 tan a tan b cos ψ)` given `tan a`, `tan b` and ψ, evaluated as
@@ -616,7 +616,7 @@ pub struct Directional<R> {
 /// `1/x`, or 0 where `x` is exactly 0.
 #[inline]
 fn inv_or_zero<R: Real>(x: R) -> R {
-    x.select(|v| v != 0.0, || R::one() / x, R::zero)
+    x.select(Cmp::Ne(0.0), || R::one() / x, R::zero)
 }
 
 /// The directional terms of medium `md` in geometry `e`.
@@ -657,7 +657,7 @@ pub fn directional<R: Real>(e: &Extinction<R>, md: &Medium<R>) -> Directional<R>
 fn inv_pair<R: Real>(k: R, m: R) -> (R, R) {
     let (d, s) = (k - m, k + m);
     let q = inv_or_zero(d * s);
-    (s * q, d.select(|v| v != 0.0, || d * q, || R::one() / s))
+    (s * q, d.select(Cmp::Ne(0.0), || d * q, || R::one() / s))
 }
 
 /// Per wavelength diffuse terms of a layer of the medium with a given LAI, shared by every
@@ -724,7 +724,7 @@ pub struct SailOutput<R> {
 fn jfunc1<R: Real>(k_m: R, inv_k_m: R, t: R, emt: R, ekt: R) -> R {
     let del = k_m * t;
     del.select(
-        |d| libm::fabs(d) > J1_SERIES_THRESHOLD,
+        Cmp::AbsGt(J1_SERIES_THRESHOLD),
         || (emt - ekt) * inv_k_m,
         || R::c(0.5) * t * (ekt + emt) * (R::one() - del * del / R::c(12.0)),
     )
