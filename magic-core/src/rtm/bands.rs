@@ -289,12 +289,18 @@ impl<V: Values> Packed<V> {
                 W::plain_from_fn(|_| self.spectral.at(i0.min(last) * ROW_WIDTH + k))
             });
         }
-        // Several rows: read them at once (f32 bytes decoded in one pass), then into lanes.
+        // Several rows: read them at once (f32 bytes decoded in one pass); lanes past the last
+        // row repeat it.
         let mut buf = [0.0; MAX_LANES * ROW_WIDTH];
-        let n = (self.n_rows - i0.min(last)).min(W::WIDTH).min(MAX_LANES);
-        let block = &mut buf[..n * ROW_WIDTH];
-        self.spectral.copy_to(i0 * ROW_WIDTH, block);
-        SpectralRow::from_fn(|k| W::plain_from_fn(|j| block[j.min(n - 1) * ROW_WIDTH + k]))
+        let i0 = i0.min(last);
+        let n = (self.n_rows - i0).min(W::WIDTH).min(MAX_LANES);
+        let (rows, rest) = buf.split_at_mut(n * ROW_WIDTH);
+        self.spectral.copy_to(i0 * ROW_WIDTH, rows);
+        let last_row = &rows[(n - 1) * ROW_WIDTH..];
+        for r in rest.chunks_exact_mut(ROW_WIDTH) {
+            r.copy_from_slice(last_row);
+        }
+        SpectralRow::from_fn(|k| W::plain_from_fn(|j| buf[j * ROW_WIDTH + k]))
     }
 
     /// Weight of row `i` in band `b`.

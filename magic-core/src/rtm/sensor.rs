@@ -233,7 +233,8 @@ impl<'r, W: Real> BandSums<'r, W> {
         W: Lanes<R>,
     {
         let end = last.min(i0 + W::WIDTH - 1);
-        for (b, (acc, &(lo, hi))) in self.acc.iter_mut().zip(self.ranges).enumerate() {
+        for b in 0..self.ranges.len().min(MAX_BANDS) {
+            let (lo, hi) = self.ranges[b];
             if lo > end || hi < i0 {
                 continue;
             }
@@ -246,7 +247,7 @@ impl<'r, W: Real> BandSums<'r, W> {
                     0.0
                 }
             });
-            *acc += v.scale(w);
+            self.acc[b] += v.scale(w);
         }
     }
 

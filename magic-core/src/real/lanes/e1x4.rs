@@ -8,8 +8,8 @@
 use super::libm64::ln4;
 use super::vector::F64x4;
 use crate::real::e1::{
-    cf_depth, e1_with_exp, ein, patch_centre, patch_index, E1_SERIES_MAX, E1_TAYLOR, E1_TAYLOR_MAX,
-    E1_TAYLOR_TERMS, EULER_GAMMA,
+    cf_depth, e1_with_exp, ein, patch_centre, patch_index, E1_PATCHES, E1_SERIES_MAX, E1_TAYLOR,
+    E1_TAYLOR_MAX, E1_TAYLOR_TERMS, EULER_GAMMA,
 };
 use crate::real::{Cmp, Real};
 
@@ -47,15 +47,24 @@ fn e1_series4(active: <F64x4 as Real>::Mask, x: F64x4) -> F64x4 {
 /// discarded by the caller).
 #[inline]
 fn e1_taylor4(x: F64x4) -> F64x4 {
-    let i = x.to_array().map(patch_index);
-    let d = x - F64x4::new(i.map(patch_centre));
+    let c = F64x4::c;
+    // The patch index of every lane, as `patch_index` computes it, in floating point.
+    let xc = x.max(c(E1_SERIES_MAX)).min(c(E1_TAYLOR_MAX));
+    let near = F64x4(((xc - c(1.0)) * c(4.0)).0.floor());
+    let far = c(12.0) + F64x4(((xc - c(4.0)) * c(2.0)).0.floor());
+    let i = F64x4::blend(xc.mask(Cmp::Le(4.0)), near, far).min(c((E1_PATCHES - 1) as f64));
+    let first = i.to_array()[0];
     let mut h = F64x4::c(0.0);
-    if i.iter().all(|&j| j == i[0]) {
-        // One patch for all lanes: each coefficient read once.
-        for &a in E1_TAYLOR[i[0]].iter().rev() {
-            h = h * d + F64x4::c(a);
+    if i.all(Cmp::Eq(first)) {
+        // One patch for all lanes (neighbouring wavelengths): each coefficient read once.
+        let p = first as usize;
+        let d = x - c(patch_centre(p));
+        for &a in E1_TAYLOR[p].iter().rev() {
+            h = h * d + c(a);
         }
     } else {
+        let i = x.to_array().map(patch_index);
+        let d = x - F64x4::new(i.map(patch_centre));
         for n in (0..E1_TAYLOR_TERMS).rev() {
             h = h * d + F64x4::new(i.map(|j| E1_TAYLOR[j][n]));
         }
