@@ -14,7 +14,18 @@ use crate::real::e1::{
 use crate::real::{Cmp, Real};
 
 /// E1 of four lanes given `ex` = e^(−x) (used for x > 1), as [`e1_with_exp`] lane by lane.
+#[inline(always)]
 pub(crate) fn e1_with_exp4(x: F64x4, ex: F64x4) -> F64x4 {
+    // Most of PROSPECT's plate absorptions are at most 1 (the series for every lane).
+    if (x.mask(Cmp::Gt(0.0)) & x.mask(Cmp::Le(E1_SERIES_MAX))).all() {
+        return F64x4::c(-EULER_GAMMA) - ln4(x) + ein(x);
+    }
+    e1_regimes4(x, ex)
+}
+
+/// [`e1_with_exp4`] for lanes in several regimes (or outside the domain).
+#[inline(never)]
+fn e1_regimes4(x: F64x4, ex: F64x4) -> F64x4 {
     if !x.all(Cmp::Gt(0.0)) {
         return x.zip(ex, e1_with_exp);
     }
