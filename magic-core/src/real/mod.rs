@@ -21,7 +21,9 @@ mod e1;
 pub mod lanes;
 
 pub use dual::Dual;
-pub use e1::{e1_f64, e1_with_exp, E1_MAX_REL_ERROR};
+pub use e1::{
+    e1_f32, e1_f64, e1_with_exp, e1_with_exp_f32, E1_F32_MAX_REL_ERROR, E1_MAX_REL_ERROR,
+};
 pub use lanes::{DualScalar, F32x16, F32x8, F64x4, F64x8, Lanes};
 
 use core::fmt::Debug;
@@ -399,7 +401,12 @@ impl Real for f32 {
     }
     #[inline]
     fn e1(self) -> Self {
-        e1_f64(self as f64) as f32
+        e1_f32(self)
+    }
+    #[inline]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let ex = libm::expf(-self);
+        (e1_with_exp_f32(self, ex), ex)
     }
     #[inline]
     fn is_finite(self) -> bool {

@@ -23,6 +23,7 @@
 //! [`Lanes::splat`].
 
 mod e1x4;
+mod e1x8;
 mod libm32;
 mod libm64;
 mod pair;

@@ -5,12 +5,12 @@
 //! `vblendvpd`, `vsqrtpd`, …) and to pairs of narrower ones or plain code elsewhere. One macro
 //! writes both types: arithmetic, comparisons with constants ([`Cmp`]) as masks, blends, square
 //! root (correctly rounded, as `libm`'s). The other functions are per type: `exp` and `ln` follow
-//! `libm`'s algorithms step by step on all lanes at once (`libm64`, `libm32`), E1 evaluates four
-//! `f64` lanes together (`e1x4`; `f32` lanes through it in `f64`, as the scalar `f32` does), the
-//! trigonometric functions go lane by lane through `libm` (they run once per spectrum, never per
-//! wavelength).
+//! `libm`'s algorithms step by step on all lanes at once (`libm64`, `libm32`), E1 takes the steps
+//! of the scalar functions on all lanes (`e1x4` for `f64`, `e1x8` for `f32`), the trigonometric
+//! functions go lane by lane through `libm` (they run once per spectrum, never per wavelength).
 
 use super::e1x4::e1_with_exp4;
+use super::e1x8::e1_with_exp8;
 use super::libm32::{expf8, logf8};
 use super::libm64::{exp4, ln4};
 use super::Lanes;
@@ -395,33 +395,6 @@ impl Real for F64x4 {
     }
 }
 
-impl F32x8 {
-    /// The lanes in `f64`, as two halves.
-    #[inline(always)]
-    fn widen(self) -> [F64x4; 2] {
-        let a = self.to_array();
-        [
-            F64x4::new([a[0] as f64, a[1] as f64, a[2] as f64, a[3] as f64]),
-            F64x4::new([a[4] as f64, a[5] as f64, a[6] as f64, a[7] as f64]),
-        ]
-    }
-    /// Two `f64` halves rounded to `f32` lanes.
-    #[inline(always)]
-    fn narrow([a, b]: [F64x4; 2]) -> Self {
-        let (a, b) = (a.to_array(), b.to_array());
-        F32x8::new([
-            a[0] as f32,
-            a[1] as f32,
-            a[2] as f32,
-            a[3] as f32,
-            b[0] as f32,
-            b[1] as f32,
-            b[2] as f32,
-            b[3] as f32,
-        ])
-    }
-}
-
 impl Real for F32x8 {
     vector_real_common!(F32x8, f32, f32x8, sinf, cosf, tanf, acosf, asinf, atanf, atan2f, powf);
     #[inline(always)]
@@ -432,10 +405,13 @@ impl Real for F32x8 {
     fn ln(self) -> Self {
         logf8(self)
     }
-    /// In `f64`, as `f32` computes E1 (`e1_f64(x as f64) as f32`).
     #[inline]
     fn e1(self) -> Self {
-        let [a, b] = self.widen();
-        Self::narrow([e1_with_exp4(a, exp4(-a)), e1_with_exp4(b, exp4(-b))])
+        e1_with_exp8(self, expf8(-self))
+    }
+    #[inline(always)]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let ex = expf8(-self);
+        (e1_with_exp8(self, ex), ex)
     }
 }
