@@ -414,6 +414,13 @@ fn cases<'a>(s: &'a Setup, model: &'a Model<'a>) -> Vec<Case<'a>> {
             Box::new(move |k| full.forward_learned(&z[at(k)], &fixed, g).unwrap()[3]),
         ),
         (
+            "scene-f64",
+            Box::new(move |k| {
+                let x = magic_core::rtm::inputs_from_learned(&z[at(k)], &fixed);
+                full.scene(&x, g).unwrap().crown.fcd
+            }),
+        ),
+        (
             "forward-f32-full",
             Box::new(move |k| full.forward_learned(&z32[at(k)], &fixed, g).unwrap()[3] as f64),
         ),
