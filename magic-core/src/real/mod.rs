@@ -91,12 +91,12 @@ pub trait Real:
     /// for lanes.
     type Plain: Real;
     /// Several values of this type computed together: on targets with SIMD (x86-64, AArch64)
-    /// [`F64x8`] for `f64`, [`F32x4`] for `f32`, duals on [`F64x4`] for duals on `f64`; elsewhere
+    /// [`F64x8`] for `f64`, [`F32x16`] for `f32`, duals on [`F64x4`] for duals on `f64`; elsewhere
     /// (the Cortex-M4F) each type is its own single lane, as lanes are for themselves.
     type Lanes: Lanes<Self>;
 
-    /// Which values satisfy a predicate ([`Real::mask`]): a `bool` for scalars and duals on
-    /// them, one bit pattern per lane for lanes.
+    /// Which values pass a comparison ([`Real::mask`]): a `bool` for scalars and duals on them,
+    /// one all-ones or all-zeros pattern per lane for lanes.
     type Mask: Copy;
 
     /// A constant (derivatives zero).

@@ -6,7 +6,7 @@
 //! [`Resampling::new`] records the wavelength spans where any band has weight and the model is
 //! evaluated only there (884 of 2101 wavelengths for Sentinel-2), and each band's first and last
 //! wavelength with weight: a batch of wavelengths evaluated together (lanes) is added only to the
-//! bands it meets (one or two of the 13 for most batches), lane by lane ([`BandSums`]).
+//! bands it meets (one or two of the 13 for most batches), lane by lane.
 
 use crate::real::{Lanes, Real};
 use crate::Error;
@@ -152,7 +152,8 @@ impl<'a> Resampling<'a> {
     /// `i0 + j`. Runs start at the beginning of each span of [`Resampling::spans`], so a span's
     /// last run may reach past it (or past the grid, which the caller clamps); those lanes are
     /// ignored, as are wavelengths without weight. The bands are summed lane by lane
-    /// ([`BandSums`]), so the order of the additions differs from [`Resampling::integrate`]'s.
+    /// (each band keeps lanes of partial sums), so the order of the additions differs from
+    /// [`Resampling::integrate`]'s.
     pub fn integrate_lanes<R: Real, W: Lanes<R>>(
         &self,
         mut spectrum: impl FnMut(usize) -> W,
