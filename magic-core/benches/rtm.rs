@@ -1,19 +1,26 @@
 //! INFORM per spectrum on one core: forward in f64 and f32, over the full 2101-wavelength tables
-//! (13 bands) and over the packed rows of the 11 observed bands a model file carries; forward +
-//! exact Jacobian of the 7 learned variables (the training path); and a whole inversion of one
-//! pixel (encoder, INFORM, correction) with the paper's released C model.
+//! (13 bands, 884 wavelengths evaluated) and over the packed rows of the 11 observed bands a model
+//! file carries (798 rows); forward + exact Jacobian of the 7 learned variables (the training
+//! path); the wavelength-independent part alone (`scene-f64`); and a whole inversion of one pixel
+//! (encoder, INFORM, correction) with the paper's released C model, in f64 and f32.
 //!
-//! It first prints thread CPU time per spectrum for every case (on a shared machine criterion's
-//! wall clock also counts time spent waiting for a core), then runs criterion. The inputs are 64
-//! points spread over the learned variables' box (the cost of PROSPECT's E1 depends on where a
-//! spectrum's absorption lands), the inversions run on the first 64 test spectra of `s2/`.
+//! The packed cases: `forward-f64-packed` runs on f64 rows checked once (as the trainer holds
+//! them); `forward-f32-packed` and the inversions take the rows from the model file's f32 bytes
+//! and check them on every call, as `invert` does (`Problem::packed`).
+//!
+//! It first prints thread CPU time per call for every case (best of three; on a shared machine
+//! criterion's wall clock also counts time spent waiting for a core), then runs criterion. The
+//! inputs are 64 points spread over the learned variables' box (the cost of PROSPECT's E1 depends
+//! on where a spectrum's absorption lands), the inversions run on the first 64 test spectra of
+//! `s2/`.
 //!
 //! Needs the data (`MAGIC_DATA`, else `../shared/data`): the RTM tables under `rtm/`, the test
 //! split of `s2/` and `oracle/pretrained_rtm_c_weights.json`; it stops with an error naming what
 //! is missing.
 //!
-//! For a profile, `MAGIC_BENCH_ONLY=<case>` (a case name as printed, e.g. `forward-f64-full`) runs only that case `MAGIC_BENCH_N` times (default 2000) and exits, e.g.
-//! `valgrind --tool=callgrind` on the bench binary.
+//! For a profile, `MAGIC_BENCH_ONLY=<case>` (a case name as printed, e.g. `forward-f64-full`) runs
+//! only that case `MAGIC_BENCH_N` times (default 2000) and exits, e.g.
+//! `valgrind --tool=callgrind --toggle-collect='*per_call*'` on the bench binary.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use magic_core::invert::{invert, Workspace};
