@@ -86,7 +86,13 @@ fn print_loop(l: &LoopReport) {
 }
 
 /// Runs the main job.
-pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: bool) -> Result<()> {
+pub fn run(
+    data_dir: Option<&Path>,
+    seed: u64,
+    epochs: usize,
+    out: &Path,
+    qemu: bool,
+) -> Result<()> {
     let p = data(data_dir, seed)?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let d = &p.data;
@@ -119,7 +125,10 @@ pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: 
     let qm = Model::decode(&qbytes)?;
     let (ef, eq) = (evaluate_splits(&fm, d)?, evaluate_splits(&qm, d)?);
     let rows = records::split_rows(d, SplitName::Test);
-    let (f_lines, q_lines) = (records::invert_rows(&fm, &rows), records::invert_rows(&qm, &rows));
+    let (f_lines, q_lines) = (
+        records::invert_rows(&fm, &rows),
+        records::invert_rows(&qm, &rows),
+    );
     let quant_diff = max_param_diff(&f_lines, &q_lines, 4);
     records::write_results(&out.join("test_inversions.csv"), &qm, &rows, &q_lines)?;
     println!(
@@ -147,7 +156,10 @@ pub fn run(data_dir: Option<&Path>, seed: u64, epochs: usize, out: &Path, qemu: 
     if qemu {
         summary["firmware"] = crate::firmware::run_test_days(&qpath, &qm, &rows, &q_lines)?;
     }
-    std::fs::write(out.join("summary.json"), serde_json::to_string_pretty(&summary)?)?;
+    std::fs::write(
+        out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?,
+    )?;
     println!("\nmodels, reports and results in {}", out.display());
     Ok(())
 }

@@ -456,7 +456,12 @@ fn physical_sail_matches_prosail() {
         );
     }
     for k in 0..N_FACTORS {
-        assert!(err[k] <= PROSAIL_MAX_ERROR, "{}: {:e}", FACTOR_NAMES[k], err[k]);
+        assert!(
+            err[k] <= PROSAIL_MAX_ERROR,
+            "{}: {:e}",
+            FACTOR_NAMES[k],
+            err[k]
+        );
     }
 }
 

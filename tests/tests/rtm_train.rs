@@ -10,8 +10,7 @@ use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
 use magic_core::{invert, Error, Variant, Workspace};
 use magic_train::rtm::{RtmTables, S2_DATA_BANDS};
 use magic_train::{
-    train_model, Dataset, ModelKind, OwnedEffect, OwnedModel, Problem as _, RtmProblem,
-    TrainConfig,
+    train_model, Dataset, ModelKind, OwnedEffect, OwnedModel, Problem as _, RtmProblem, TrainConfig,
 };
 use std::path::PathBuf;
 use std::sync::OnceLock;

@@ -39,6 +39,13 @@ pub trait Family<R>: Sync {
     fn reject(&self, _res: &R, _fit: &Self::Fit) -> Option<String> {
         None
     }
+    /// A detection statistic of the fit (larger: stronger) that must also exceed every
+    /// surrogate's, where the score alone can be met by structure the surrogates lack (the step
+    /// scan's peak: a level that wanders for years explains held-out days like a step, but only
+    /// a step is sharper than the noise makes its local jumps); `None` for most families.
+    fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
+        None
+    }
     /// The fit's key parameters (name, value), whose uncertainty the bootstrap measures.
     fn key_params(&self, _res: &R, _fit: &Self::Fit) -> Vec<(&'static str, f64)> {
         vec![]
@@ -79,14 +86,16 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
         let fit = self.fit(res)?;
         let score = self.score(&fit);
         let seeds = surrogate_seeds(opts.seed, self.name(), opts.surrogates.max(2));
-        let chance = seeds
+        let surrogates = seeds
             .par_iter()
             .map(|s| {
                 let mut rng = StdRng::seed_from_u64(*s);
                 let sur = self.surrogate(res, &fit, &mut rng)?;
-                Ok(self.score(&self.fit(&sur)?))
+                let f = self.fit(&sur)?;
+                Ok((self.score(&f), self.statistic(&f)))
             })
-            .collect::<Result<Vec<f64>>>()?;
+            .collect::<Result<Vec<(f64, Option<f64>)>>>()?;
+        let chance = surrogates.iter().map(|s| s.0).collect();
         let mut c = Candidate::from_scores(
             self.name(),
             score,
@@ -98,6 +107,17 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
         if let Some(why) = self.reject(res, &fit) {
             c.significant = false;
             c.rejected = Some(why);
+        } else if let Some(stat) = self.statistic(&fit) {
+            let top = surrogates
+                .iter()
+                .filter_map(|s| s.1)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if stat <= top {
+                c.significant = false;
+                c.rejected = Some(format!(
+                    "detection statistic {stat:.3} not above the surrogates' largest, {top:.3}"
+                ));
+            }
         }
         if c.significant && opts.bootstrap > 0 {
             c.uncertainty = bootstrap(self, res, &fit, opts)?;

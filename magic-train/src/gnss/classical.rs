@@ -7,13 +7,13 @@
 //! the table. Whether the fitted sources are plausible is a separate question, reported as the
 //! share of days with a shallow, moderate source and, for the test period, the 2008 inflation.
 
+use super::lsq::{self, Grid, Options, Problem};
 use super::plausibility::plausible;
 use super::{effect_bounds, GnssProblem};
 use crate::data::{day_number, SplitName};
 use crate::model::OwnedEffect;
 use crate::numerics::median;
 use crate::problem::Metric;
-use super::lsq::{self, Grid, Options, Problem};
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::effects::{mogi_with_effects, Effect};
 use magic_core::mogi::{PAPER_BOUNDS, PARAM_NAMES};

@@ -65,7 +65,10 @@ pub fn analysis_plots(res: &GnssResiduals, a: &Analysis, dir: &Path) -> Result<(
     let rms = triples(&a.residuals["station_rms_mm"]);
     plots::station_map(
         &dir.join("residual_rms.png"),
-        &format!("Residual RMS per station, mm ({}, all components)", splits(a)),
+        &format!(
+            "Residual RMS per station, mm ({}, all components)",
+            splits(a)
+        ),
         &st,
         &[],
         &rms.iter()

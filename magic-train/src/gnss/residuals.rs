@@ -199,7 +199,11 @@ fn invert_split(
 
 /// Residuals (observation − F(E(x)), standardised) of every day of `splits`, in time order, with
 /// the tangent space of F at the main source's typical position.
-pub fn residuals(p: &GnssProblem, model: &Model<'_>, splits: &[SplitName]) -> Result<GnssResiduals> {
+pub fn residuals(
+    p: &GnssProblem,
+    model: &Model<'_>,
+    splits: &[SplitName],
+) -> Result<GnssResiduals> {
     let nc = p.data.n_obs();
     if model.n_obs() != nc {
         bail!("the model has {} channels, the data {}", model.n_obs(), nc);

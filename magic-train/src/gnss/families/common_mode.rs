@@ -76,9 +76,18 @@ impl Family<GnssResiduals> for CommonMode {
     }
     fn key_params(&self, res: &GnssResiduals, _: &LatentFit) -> Vec<(&'static str, f64)> {
         let rms = rms_mm(res);
-        vec![("rms_e_mm", rms[0]), ("rms_n_mm", rms[1]), ("rms_u_mm", rms[2])]
+        vec![
+            ("rms_e_mm", rms[0]),
+            ("rms_n_mm", rms[1]),
+            ("rms_u_mm", rms[2]),
+        ]
     }
-    fn resample(&self, res: &GnssResiduals, _: &LatentFit, rng: &mut StdRng) -> Option<Result<GnssResiduals>> {
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        _: &LatentFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
         Some(Ok(latent::resample(res, &patterns(res), rng)))
     }
 }

@@ -79,7 +79,12 @@ impl Family<GnssResiduals> for Elevation {
         let p = self.params(res, fit);
         vec![("mm_per_km", p["mm_per_km"].as_f64().unwrap_or(f64::NAN))]
     }
-    fn resample(&self, res: &GnssResiduals, _: &LatentFit, rng: &mut StdRng) -> Option<Result<GnssResiduals>> {
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        _: &LatentFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
         Some(Ok(latent::resample(res, &[pattern(res)], rng)))
     }
     fn declare(&self, res: &GnssResiduals, _: &LatentFit) -> Option<OwnedEffect> {

@@ -274,7 +274,12 @@ impl Family<GnssResiduals> for SecondSource {
             ("depth_km", fit.pos[2]),
         ]
     }
-    fn resample(&self, res: &GnssResiduals, fit: &SourceFit, rng: &mut StdRng) -> Option<Result<GnssResiduals>> {
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        fit: &SourceFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
         Some(Ok(latent::resample(res, &[pattern(res, fit.pos)], rng)))
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {

@@ -131,6 +131,10 @@ impl Family<GnssResiduals> for Step {
         Ok(dated::surrogate(res, &fit.fit, rng))
     }
     /// Station, epoch, offset (mm, E N U) and the scan statistic.
+    /// The scan statistic: a step's local jump must stand out of the noise's.
+    fn statistic(&self, fit: &Self::Fit) -> Option<f64> {
+        Some(fit.fit.stat)
+    }
     fn params(&self, res: &GnssResiduals, fit: &Self::Fit) -> serde_json::Value {
         let (ns, f) = (res.ns(), &fit.fit);
         json!({
@@ -150,7 +154,12 @@ impl Family<GnssResiduals> for Step {
             ("offset_u_mm", mm(2)),
         ]
     }
-    fn resample(&self, res: &GnssResiduals, fit: &Self::Fit, rng: &mut StdRng) -> Option<Result<GnssResiduals>> {
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        fit: &Self::Fit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
         Some(Ok(dated::resample(res, &fit.fit, rng)))
     }
     fn declare(&self, res: &GnssResiduals, fit: &Self::Fit) -> Option<OwnedEffect> {
