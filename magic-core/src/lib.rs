@@ -15,6 +15,8 @@
 //! * [`sun`] — the sun's zenith and azimuth from date, time and place (illumination geometry);
 //! * [`invert`](mod@invert) — observations to variables, reconstruction, residual and quality flags.
 //! * [`lsq`] — the classical baseline: per-day Levenberg–Marquardt fits with the exact Jacobian.
+//! * [`uncertainty`] — standard deviations of the inverted variables (local curvature at the
+//!   solution, exact Jacobian).
 #![no_std]
 #![deny(missing_docs)]
 // `unsafe` is denied everywhere except the Armv7E-M int8 kernel (`quant::dsp`, feature `dsp`,
@@ -29,6 +31,7 @@ pub mod real;
 pub mod rtm;
 pub mod sun;
 pub mod time;
+pub mod uncertainty;
 
 pub use error::{Error, MessageSink};
 pub use real::{Dual, Real};

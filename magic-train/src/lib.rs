@@ -16,6 +16,7 @@ pub mod physics;
 pub mod pipeline;
 pub mod plots;
 pub mod qemu;
+pub mod raster;
 pub mod records;
 pub mod reproduce;
 pub mod residuals;

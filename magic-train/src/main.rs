@@ -319,6 +319,52 @@ enum Cmd {
         #[arg(long)]
         no_qemu: bool,
     },
+    /// Map the forest variables of a Sentinel-2 image (RTM model, variant B or C): GeoTIFF in,
+    /// float32 GeoTIFF out with one band per column of `magic invert` (the variables,
+    /// `residual_rms`, `flags`), then one standard-deviation band per variable (`<name>_sd`).
+    Map {
+        /// RTM model file (variant B or C).
+        #[arg(long)]
+        model: PathBuf,
+        /// Multi-band GeoTIFF with the model's bands (integer digital numbers or float
+        /// reflectance), or a folder of single-band files named by band (`…_B05.tif`).
+        #[arg(long)]
+        input: PathBuf,
+        /// Output GeoTIFF.
+        #[arg(long)]
+        output: PathBuf,
+        /// Added to digital numbers before dividing by 10 000 (−1000 from processing baseline
+        /// 04.00 on).
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        offset: f64,
+        /// Scene classification raster on the same grid: cloud, cloud shadow, cirrus, snow,
+        /// water, saturated and no-data pixels are masked.
+        #[arg(long)]
+        scl: Option<PathBuf>,
+        /// Run INFORM and the correction for every pixel: residual, flags and standard
+        /// deviations (about ten times the cost of the encoder alone).
+        #[arg(long)]
+        residual: bool,
+        /// Acquisition date YYYY-MM-DD (needed by models with the illumination effect).
+        #[arg(long)]
+        date: Option<String>,
+        /// Map only the window x0,y0,width,height (pixels).
+        #[arg(long)]
+        window: Option<String>,
+        /// The input file's bands in order, comma-separated (e.g. B01,B02,…), when not the
+        /// model's.
+        #[arg(long, value_delimiter = ',')]
+        bands: Option<Vec<String>>,
+        /// Write the raw standard deviations (without the calibration factors).
+        #[arg(long)]
+        raw_sd: bool,
+        /// Also write a PNG of one band here.
+        #[arg(long)]
+        preview: Option<PathBuf>,
+        /// The band of the PNG.
+        #[arg(long, default_value = "LAI")]
+        preview_band: String,
+    },
     /// Convert a folder of NGL `<STA>.tenv3` files to daily displacement rows (mm) for `invert`.
     Tenv3 {
         /// Folder holding `<STA>.tenv3` files.
@@ -604,6 +650,52 @@ fn run(cli: Cli) -> Result<()> {
                     lines.len()
                 );
             }
+        }
+        Cmd::Map {
+            model,
+            input,
+            output,
+            offset,
+            scl,
+            residual,
+            date,
+            window,
+            bands,
+            raw_sd,
+            preview,
+            preview_band,
+        } => {
+            let o = magic_train::raster::map::MapOptions {
+                model,
+                input,
+                output,
+                offset,
+                scl,
+                residual,
+                date,
+                window: window
+                    .as_deref()
+                    .map(magic_train::raster::map::parse_window)
+                    .transpose()?,
+                bands,
+                raw_sd,
+                preview,
+                preview_band,
+                progress: true,
+                window_rows: magic_train::raster::map::WINDOW_ROWS,
+            };
+            let s = magic_train::raster::map::run(&o)?;
+            eprintln!(
+                "mapped {} pixels ({} no data, {} masked, {} failed{}) in {:.1} s ({:.0} pixels/s inverting) -> {}",
+                s.pixels,
+                s.no_data,
+                s.masked,
+                s.failed,
+                if residual { format!(", {} without sd", s.sd_failed) } else { String::new() },
+                s.seconds,
+                s.pixels as f64 / s.compute_seconds.max(1e-9),
+                o.output.display()
+            );
         }
         Cmd::Forward {
             problem:
