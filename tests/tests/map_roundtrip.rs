@@ -6,8 +6,9 @@
 //! window is the same block of the full map on a moved grid; the SCL masks its classes.
 //!
 //! Needs the shared data (`MAGIC_DATA`) and GDAL's `gdalinfo`/`gdal_translate` (Debian's
-//! `gdal-bin`, installed by `scripts/test-all.sh`). `MAGIC_MAP_PNG=FILE` keeps the LAI picture of
-//! the first test (the README's).
+//! `gdal-bin`, installed by `scripts/test-all.sh`). The model is a small C trained here, or the
+//! file `MAGIC_MAP_MODEL` names; `MAGIC_MAP_PNG=FILE` keeps the LAI picture of the first test (the
+//! README's).
 
 mod map_common;
 
@@ -39,7 +40,10 @@ fn fixture() -> &'static Fixture {
     F.get_or_init(|| {
         let dir = tmp("roundtrip");
         let model = dir.join("C.magic");
-        std::fs::write(&model, small_model(RtmVariant::C, 3)).unwrap();
+        match std::env::var_os("MAGIC_MAP_MODEL") {
+            Some(m) => std::fs::copy(m, &model).map(|_| ()).unwrap(),
+            None => std::fs::write(&model, small_model(RtmVariant::C, 3)).unwrap(),
+        }
         let scene = Scene::test_split();
         let image = dir.join("test_split.tif");
         scene.write(&image, &test_geo());

@@ -125,10 +125,18 @@ impl Raster {
                 path.display()
             ),
         };
-        let format = dec
-            .find_tag_unsigned::<u16>(Tag::SampleFormat)
+        // One SampleFormat per sample (or one for all); mixed formats are not a stack of bands.
+        let formats = dec
+            .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
             .map_err(|e| err(path, "bad SampleFormat tag", e))?
-            .unwrap_or(1);
+            .unwrap_or_else(|| vec![1]);
+        let format = formats.first().copied().unwrap_or(1);
+        if formats.iter().any(|&f| f != format) {
+            bail!(
+                "{}: samples of different formats ({formats:?}); expected one sample type for every band",
+                path.display()
+            );
+        }
         let kind = match (SampleFormat::from_u16(format), bits) {
             (Some(SampleFormat::Uint), 8 | 16 | 32) => SampleKind::Unsigned(bits),
             (Some(SampleFormat::Int), 8 | 16 | 32) => SampleKind::Signed(bits),
