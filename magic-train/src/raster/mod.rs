@@ -21,3 +21,6 @@ pub mod preview;
 pub mod reader;
 pub mod scl;
 pub mod writer;
+
+/// The `tiff` crate the reader uses (for callers that make or inspect TIFF files with it).
+pub use tiff;
