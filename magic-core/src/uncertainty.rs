@@ -333,7 +333,10 @@ fn correction_jacobian(model: &Model<'_>, p: usize, sw: &mut SdWorkspace) -> Res
 
 /// The diagonal of the inverse of the symmetric positive definite matrix whose lower triangle
 /// (first `p` rows and columns) is in `a`, by Cholesky: `a` is overwritten with the factor.
-fn diag_inverse(a: &mut [[f64; MAX_PARAMS]; MAX_PARAMS], p: usize) -> Result<[f64; MAX_PARAMS], Error> {
+fn diag_inverse(
+    a: &mut [[f64; MAX_PARAMS]; MAX_PARAMS],
+    p: usize,
+) -> Result<[f64; MAX_PARAMS], Error> {
     let not_pd = Error::OutOfRange {
         what: "curvature matrix not positive definite",
     };

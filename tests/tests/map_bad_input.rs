@@ -122,7 +122,10 @@ fn a_band_count_that_does_not_match_is_an_error() {
         "--output",
         f.dir.join("y.tif").to_str().unwrap(),
     ]);
-    assert!(!ok && err.contains("three_bands.tif: 3 bands, the model expects 11"), "{err}");
+    assert!(
+        !ok && err.contains("three_bands.tif: 3 bands, the model expects 11"),
+        "{err}"
+    );
     assert!(!f.dir.join("y.tif").exists(), "no output on error");
 }
 
@@ -130,14 +133,21 @@ fn a_band_count_that_does_not_match_is_an_error() {
 fn an_unsupported_sample_type_is_an_error() {
     let f = fixture();
     let p = f.dir.join("u64.tif");
-    let mut tif = magic_train::raster::tiff::encoder::TiffEncoder::new(std::fs::File::create(&p).unwrap()).unwrap();
+    let mut tif =
+        magic_train::raster::tiff::encoder::TiffEncoder::new(std::fs::File::create(&p).unwrap())
+            .unwrap();
     tif.write_image::<magic_train::raster::tiff::encoder::colortype::Gray64>(4, 4, &[7u64; 16])
         .unwrap();
     drop(tif);
     let e = fails(&options(&p, "x.tif"));
-    assert!(e.contains("u64.tif") && e.contains("unsupported sample type"), "{e}");
+    assert!(
+        e.contains("u64.tif") && e.contains("unsupported sample type"),
+        "{e}"
+    );
     let p = f.dir.join("rgb8.tif");
-    let mut tif = magic_train::raster::tiff::encoder::TiffEncoder::new(std::fs::File::create(&p).unwrap()).unwrap();
+    let mut tif =
+        magic_train::raster::tiff::encoder::TiffEncoder::new(std::fs::File::create(&p).unwrap())
+            .unwrap();
     tif.write_image::<magic_train::raster::tiff::encoder::colortype::RGB8>(4, 4, &[7u8; 48])
         .unwrap();
     drop(tif);
@@ -165,7 +175,10 @@ fn truncated_or_corrupt_files_are_errors() {
     }
     std::fs::write(&p, &bad).unwrap();
     let e = fails(&options(&p, "cut_map.tif"));
-    assert!(e.contains("cut.tif") && e.contains("cannot decode strip"), "{e}");
+    assert!(
+        e.contains("cut.tif") && e.contains("cannot decode strip"),
+        "{e}"
+    );
     let e = fails(&options(&f.dir.join("absent.tif"), "x.tif"));
     assert!(e.contains("absent.tif: cannot open"), "{e}");
     std::fs::write(&p, b"not a tiff at all").unwrap();
@@ -202,7 +215,9 @@ fn a_missing_or_partial_georeference_is_a_warning() {
         o.residual = false;
         let s = map::run(&o).unwrap();
         assert!(
-            s.warnings.iter().any(|w| w.contains(want) && w.contains(name)),
+            s.warnings
+                .iter()
+                .any(|w| w.contains(want) && w.contains(name)),
             "{name}: {:?}",
             s.warnings
         );
@@ -301,7 +316,10 @@ fn the_tiff_crate_behaves_as_described() {
         let img = t.new_image::<colortype::RGB8>(4, 4).unwrap();
         let _ = img.write_data(&[0u8; 16]);
     });
-    assert!(r.is_err(), "write_data with too little data no longer panics");
+    assert!(
+        r.is_err(),
+        "write_data with too little data no longer panics"
+    );
     // 2. `write_strip` writes strips one at a time but does not compress them: the strips of an
     //    image declared deflate are raw, so the file does not decode as written.
     let mut c = Cursor::new(Vec::new());

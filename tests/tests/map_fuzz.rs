@@ -48,7 +48,11 @@ impl Rng {
 
 fn env_u64(name: &str, default: u64) -> u64 {
     std::env::var(name)
-        .map(|v| v.trim().parse().unwrap_or_else(|_| panic!("{name}={v}: an integer")))
+        .map(|v| {
+            v.trim()
+                .parse()
+                .unwrap_or_else(|_| panic!("{name}={v}: an integer"))
+        })
         .unwrap_or(default)
 }
 
@@ -186,7 +190,9 @@ fn exercise(path: &Path) {
                 let mut y = 0;
                 while y < h {
                     let rows = 3.min(h - y);
-                    if r.read_band(b, 0, y, rows, &mut buf[..(rows * w) as usize]).is_err() {
+                    if r.read_band(b, 0, y, rows, &mut buf[..(rows * w) as usize])
+                        .is_err()
+                    {
                         continue 'bands;
                     }
                     y += rows;
@@ -195,10 +201,12 @@ fn exercise(path: &Path) {
             let _ = r.read_band(nb, 0, 0, 1, &mut buf[..w as usize]);
             // Re-open: a band-interleaved or multi-file read restarts the cache.
             if nb == 11 {
-                let names: Vec<String> = ["B02", "B03", "B04", "B05", "B06", "B07", "B08", "B8A", "B09", "B11", "B12"]
-                    .iter()
-                    .map(|s| s.to_string())
-                    .collect();
+                let names: Vec<String> = [
+                    "B02", "B03", "B04", "B05", "B06", "B07", "B08", "B8A", "B09", "B11", "B12",
+                ]
+                .iter()
+                .map(|s| s.to_string())
+                .collect();
                 if let Ok(mut i) = Input::open(path, &names, None, -1000.0) {
                     let mut out = Vec::new();
                     let _ = i.read(0, 0, w, h.min(5), &mut out);
@@ -218,7 +226,9 @@ fn exercise(path: &Path) {
 fn fuzz_geotiff_reader() {
     let cases = env_u64("MAGIC_MAP_FUZZ_CASES", 20_000);
     let seed = env_u64("MAGIC_MAP_FUZZ_SEED", 0x7469_6666);
-    let only = std::env::var("MAGIC_MAP_FUZZ_ONLY").ok().map(|v| v.parse::<u64>().unwrap());
+    let only = std::env::var("MAGIC_MAP_FUZZ_ONLY")
+        .ok()
+        .map(|v| v.parse::<u64>().unwrap());
     let case_limit = Duration::from_secs(env_u64("MAGIC_MAP_FUZZ_CASE_SECS", 10));
     // Every seed reads cleanly.
     let dir = std::env::temp_dir().join(format!("magic-map-fuzz-{}", std::process::id()));
@@ -296,7 +306,9 @@ fn fuzz_geotiff_reader() {
                     );
                 }
             }
-            Err(mpsc::RecvTimeoutError::Disconnected) => panic!("fuzz worker ended without a result"),
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                panic!("fuzz worker ended without a result")
+            }
         }
     }
 }

@@ -223,7 +223,10 @@ fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
         assert_eq!(b["type"].as_str(), Some("Float32"));
         assert_eq!(b["noDataValue"].as_str(), Some("NaN"), "{b}");
     }
-    eprintln!("gdalinfo: {} bands, geoTransform {gt:?}, EPSG:32633", gbands.len());
+    eprintln!(
+        "gdalinfo: {} bands, geoTransform {gt:?}, EPSG:32633",
+        gbands.len()
+    );
 }
 
 #[test]
@@ -233,15 +236,48 @@ fn every_layout_gives_the_same_map() {
     let variants: [(&str, &[&str]); 4] = [
         (
             "tiled_zstd_pixel_bigtiff",
-            &["-co", "TILED=YES", "-co", "BLOCKXSIZE=64", "-co", "BLOCKYSIZE=16", "-co", "COMPRESS=ZSTD", "-co", "INTERLEAVE=PIXEL", "-co", "BIGTIFF=YES"],
+            &[
+                "-co",
+                "TILED=YES",
+                "-co",
+                "BLOCKXSIZE=64",
+                "-co",
+                "BLOCKYSIZE=16",
+                "-co",
+                "COMPRESS=ZSTD",
+                "-co",
+                "INTERLEAVE=PIXEL",
+                "-co",
+                "BIGTIFF=YES",
+            ],
         ),
         (
             "striped_lzw_band",
-            &["-co", "COMPRESS=LZW", "-co", "PREDICTOR=2", "-co", "INTERLEAVE=BAND", "-co", "BLOCKYSIZE=3"],
+            &[
+                "-co",
+                "COMPRESS=LZW",
+                "-co",
+                "PREDICTOR=2",
+                "-co",
+                "INTERLEAVE=BAND",
+                "-co",
+                "BLOCKYSIZE=3",
+            ],
         ),
         (
             "tiled_deflate_band",
-            &["-co", "TILED=YES", "-co", "BLOCKXSIZE=32", "-co", "BLOCKYSIZE=32", "-co", "COMPRESS=DEFLATE", "-co", "INTERLEAVE=BAND"],
+            &[
+                "-co",
+                "TILED=YES",
+                "-co",
+                "BLOCKXSIZE=32",
+                "-co",
+                "BLOCKYSIZE=32",
+                "-co",
+                "COMPRESS=DEFLATE",
+                "-co",
+                "INTERLEAVE=BAND",
+            ],
         ),
         ("striped_none_pixel", &["-co", "INTERLEAVE=PIXEL"]),
     ];
@@ -283,8 +319,14 @@ fn every_layout_gives_the_same_map() {
         },
     )
     .unwrap();
-    wr.write_rows(h, &planes.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>())
-        .unwrap();
+    wr.write_rows(
+        h,
+        &planes
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect::<Vec<u8>>(),
+    )
+    .unwrap();
     wr.finish().unwrap();
     let out = f.dir.join("float_map.tif");
     map::run(&options(&img, &out, false)).unwrap();
@@ -308,7 +350,11 @@ fn every_layout_gives_the_same_map() {
         args.push("-b".to_string());
         args.push(k.to_string());
     }
-    gdal_translate(&f.image, &reversed, &args.iter().map(|s| s.as_str()).collect::<Vec<_>>());
+    gdal_translate(
+        &f.image,
+        &reversed,
+        &args.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+    );
     let out = f.dir.join("reversed_map.tif");
     let mut o = options(&reversed, &out, false);
     o.bands = Some(names.iter().rev().cloned().collect());
@@ -336,7 +382,10 @@ fn a_window_is_the_same_block_on_a_moved_grid() {
         }
     }
     let gt: Vec<f64> = serde_json::from_value(gdalinfo(&out)["geoTransform"].clone()).unwrap();
-    assert_eq!(gt, vec![499_980.0 + 100.0, 10.0, 0.0, 5_300_040.0 - 30.0, 0.0, -10.0]);
+    assert_eq!(
+        gt,
+        vec![499_980.0 + 100.0, 10.0, 0.0, 5_300_040.0 - 30.0, 0.0, -10.0]
+    );
     o.window = Some([250, 0, 50, 9]);
     let e = map::run(&o).unwrap_err().to_string();
     assert!(e.contains("not inside"), "{e}");

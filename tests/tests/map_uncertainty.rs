@@ -14,10 +14,11 @@ use magic_core::model_file::MAX_PARAMS;
 use magic_core::uncertainty::{forward_jacobian, standard_deviations, SdWorkspace};
 use magic_core::{invert_at, Model, Variant, Workspace};
 use magic_tests::random_mogi_model;
-use magic_train::raster::calibrate::{self, coverage, factors, normalised_errors, simulate, S2_NOISE};
+use magic_train::raster::calibrate::{
+    self, coverage, factors, normalised_errors, simulate, S2_NOISE,
+};
 use magic_train::raster::pixel::{band_names, N_VARIABLES};
-use magic_train::rtm_pipeline::{train_rtm, RtmSetup, RtmVariant};
-use magic_train::train::TrainConfig;
+use magic_train::rtm_pipeline::RtmVariant;
 use map_common::*;
 
 /// Largest difference between the dual-number Jacobian and central differences, relative to
@@ -47,7 +48,10 @@ fn jacobian_check(bytes: &[u8], t_day: f64, what: &str) -> f64 {
         let mut y0 = vec![0.0; n];
         forward(&model, &z, t_day, &mut y0).unwrap();
         for (a, b) in y.iter().zip(&y0) {
-            assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{what}: F {a} vs {b}");
+            assert!(
+                (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+                "{what}: F {a} vs {b}"
+            );
         }
         for k in 0..p {
             let [lo, hi] = model.bounds[k];
@@ -58,7 +62,10 @@ fn jacobian_check(bytes: &[u8], t_day: f64, what: &str) -> f64 {
             let (mut yp, mut ym) = (vec![0.0; n], vec![0.0; n]);
             forward(&model, &zp, t_day, &mut yp).unwrap();
             forward(&model, &zm, t_day, &mut ym).unwrap();
-            let scale = (0..n).map(|i| jac[i][k].abs()).fold(0.0, f64::max).max(1e-300);
+            let scale = (0..n)
+                .map(|i| jac[i][k].abs())
+                .fold(0.0, f64::max)
+                .max(1e-300);
             for i in 0..n {
                 let cd = (yp[i] - ym[i]) / (2.0 * h);
                 let d = (jac[i][k] - cd).abs() / scale;
@@ -100,7 +107,11 @@ fn standard_deviations_are_positive_and_refuse_bad_input() {
             let [lo, hi] = model.bounds[k];
             // The prior caps each sd at range/√12.
             let cap = (hi - lo) as f64 / 12f64.sqrt();
-            assert!(u.sd[k] > 0.0 && u.sd[k] <= cap * (1.0 + 1e-9), "sd {k} = {}", u.sd[k]);
+            assert!(
+                u.sd[k] > 0.0 && u.sd[k] <= cap * (1.0 + 1e-9),
+                "sd {k} = {}",
+                u.sd[k]
+            );
         }
         assert!(u.sd[7] > 0.0 && u.sd[8] > 0.0);
         // Wrong sizes and missing bands are errors, not panics.
@@ -123,22 +134,7 @@ const TWO_SD_MIN: f64 = 0.85;
 
 #[test]
 fn calibrated_standard_deviations_cover_the_truth() {
-    let bytes = match std::env::var_os("MAGIC_MAP_MODEL") {
-        Some(p) => std::fs::read(p).unwrap(),
-        None => {
-            let d = data();
-            let s = RtmSetup::read(&d.join("s2"), &d.join("rtm"), magic_core::rtm::Geometry::Physical)
-                .unwrap();
-            let cfg = TrainConfig {
-                epochs: 3,
-                progress: false,
-                ..TrainConfig::s2()
-            };
-            let (m, _) =
-                train_rtm(&s, &s.data.train.head(2000), &s.data.valid, RtmVariant::C, &cfg, 1).unwrap();
-            m.encode().unwrap()
-        }
-    };
+    let bytes = figures_model();
     let model = Model::decode(&bytes).unwrap();
     // Factors from the map's own calibration spectra; coverage on spectra of another seed.
     let f = calibrate::calibrate(&model, f64::NAN).unwrap();
@@ -153,7 +149,9 @@ fn calibrated_standard_deviations_cover_the_truth() {
         test.len(),
         S2_NOISE
     );
-    eprintln!("| variable | factor | raw ±1 sd | raw ±2 sd | calibrated ±1 sd | calibrated ±2 sd |");
+    eprintln!(
+        "| variable | factor | raw ±1 sd | raw ±2 sd | calibrated ±1 sd | calibrated ±2 sd |"
+    );
     eprintln!("|---|---|---|---|---|---|");
     for k in 0..N_VARIABLES {
         eprintln!(

@@ -17,10 +17,10 @@
 use super::pixel::N_VARIABLES;
 use anyhow::{bail, Result};
 use magic_core::invert::{forward, model_decoder, Workspace};
+use magic_core::invert_at;
 use magic_core::model_file::{Model, Problem, Variant};
 use magic_core::rtm::inform::crown_from_cover;
 use magic_core::uncertainty::{standard_deviations, SdWorkspace};
-use magic_core::invert_at;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -58,7 +58,12 @@ pub struct Synthetic {
 
 /// The model's reconstruction at physical variables `z` (F, then C for variant C), physical
 /// units.
-pub fn reconstruct(model: &Model<'_>, z: &[f64], t_day: f64, ws: &mut Workspace) -> Result<Vec<f64>> {
+pub fn reconstruct(
+    model: &Model<'_>,
+    z: &[f64],
+    t_day: f64,
+    ws: &mut Workspace,
+) -> Result<Vec<f64>> {
     let n = model.n_obs();
     let mut y = vec![0.0; n];
     forward(model, z, t_day, &mut y).map_err(|e| anyhow::anyhow!("forward model: {e}"))?;
@@ -76,7 +81,13 @@ pub fn reconstruct(model: &Model<'_>, z: &[f64], t_day: f64, ws: &mut Workspace)
 }
 
 /// `n` synthetic spectra from `seed` (see the module documentation).
-pub fn simulate(model: &Model<'_>, n: usize, seed: u64, noise: Noise, t_day: f64) -> Result<Vec<Synthetic>> {
+pub fn simulate(
+    model: &Model<'_>,
+    n: usize,
+    seed: u64,
+    noise: Noise,
+    t_day: f64,
+) -> Result<Vec<Synthetic>> {
     let Problem::Rtm { fixed, .. } = &model.problem else {
         bail!("synthetic spectra need an RTM model");
     };
@@ -118,7 +129,11 @@ fn gaussian(rng: &mut StdRng) -> f64 {
 
 /// Normalised errors (estimate − truth) / raw sd per variable, for the spectra that invert
 /// with finite standard deviations.
-pub fn normalised_errors(model: &Model<'_>, spectra: &[Synthetic], t_day: f64) -> Vec<[f64; N_VARIABLES]> {
+pub fn normalised_errors(
+    model: &Model<'_>,
+    spectra: &[Synthetic],
+    t_day: f64,
+) -> Vec<[f64; N_VARIABLES]> {
     spectra
         .par_iter()
         .map_init(
@@ -174,6 +189,12 @@ pub fn factors(errors: &[[f64; N_VARIABLES]]) -> Result<Vec<f64>> {
 /// Factors for `model` from [`CALIBRATION_SPECTRA`] spectra of [`CALIBRATION_SEED`] with
 /// [`S2_NOISE`].
 pub fn calibrate(model: &Model<'_>, t_day: f64) -> Result<Vec<f64>> {
-    let s = simulate(model, CALIBRATION_SPECTRA, CALIBRATION_SEED, S2_NOISE, t_day)?;
+    let s = simulate(
+        model,
+        CALIBRATION_SPECTRA,
+        CALIBRATION_SEED,
+        S2_NOISE,
+        t_day,
+    )?;
     factors(&normalised_errors(model, &s, t_day))
 }

@@ -100,9 +100,8 @@ impl GeoRef {
             }
         }
         if let Some(v) = get(Tag::GeoKeyDirectoryTag)? {
-            g.key_directory = shorts(v).filter(|k| {
-                k.len() >= 4 && k.len() % 4 == 0 && k[3] as usize == k.len() / 4 - 1
-            });
+            g.key_directory = shorts(v)
+                .filter(|k| k.len() >= 4 && k.len() % 4 == 0 && k[3] as usize == k.len() / 4 - 1);
             if g.key_directory.is_none() {
                 g.malformed.push("GeoKeyDirectory");
             }
@@ -136,7 +135,10 @@ impl GeoRef {
     pub fn problem(&self) -> Option<String> {
         let mut p = Vec::new();
         if !self.malformed.is_empty() {
-            p.push(format!("malformed tags dropped: {}", self.malformed.join(", ")));
+            p.push(format!(
+                "malformed tags dropped: {}",
+                self.malformed.join(", ")
+            ));
         }
         match (self.has_grid(), self.has_crs()) {
             (true, true) => {}
@@ -271,6 +273,9 @@ mod tests {
             ..GeoRef::default()
         };
         assert!(gcp.window(1, 1).1, "ground control points are dropped");
-        assert!(GeoRef::default().problem().unwrap().contains("no georeference"));
+        assert!(GeoRef::default()
+            .problem()
+            .unwrap()
+            .contains("no georeference"));
     }
 }

@@ -45,7 +45,12 @@ fn has_word(name: &str, word: &str) -> bool {
 impl Input {
     /// Opens `path` (a file or a folder) for a model observing `bands` (names as in
     /// [`magic_core::rtm::S2_BANDS`]). `names` is the file's band order (`--bands`), if given.
-    pub fn open(path: &Path, bands: &[String], names: Option<&[String]>, offset: f64) -> Result<Input> {
+    pub fn open(
+        path: &Path,
+        bands: &[String],
+        names: Option<&[String]>,
+        offset: f64,
+    ) -> Result<Input> {
         let (files, map) = if path.is_dir() {
             if names.is_some() {
                 bail!("--bands names the bands of one multi-band file; {} is a folder (its files are matched to bands by name)", path.display());
@@ -54,9 +59,9 @@ impl Input {
                 .with_context(|| format!("{}: cannot list the folder", path.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| {
-                    p.extension()
-                        .and_then(|e| e.to_str())
-                        .is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"))
+                    p.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                        e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff")
+                    })
                 })
                 .collect();
             entries.sort();
@@ -65,7 +70,11 @@ impl Input {
             for b in bands {
                 let hits: Vec<&PathBuf> = entries
                     .iter()
-                    .filter(|p| p.file_stem().and_then(|s| s.to_str()).is_some_and(|s| has_word(s, b)))
+                    .filter(|p| {
+                        p.file_stem()
+                            .and_then(|s| s.to_str())
+                            .is_some_and(|s| has_word(s, b))
+                    })
                     .collect();
                 match hits.as_slice() {
                     [one] => {
@@ -111,13 +120,15 @@ impl Input {
                     }
                     bands
                         .iter()
-                        .map(|b| match names.iter().position(|n| n.eq_ignore_ascii_case(b)) {
-                            Some(s) => Ok((0, s as u16)),
-                            None => bail!(
-                                "--bands {}: the model's band {b} is not among them",
-                                names.join(",")
-                            ),
-                        })
+                        .map(
+                            |b| match names.iter().position(|n| n.eq_ignore_ascii_case(b)) {
+                                Some(s) => Ok((0, s as u16)),
+                                None => bail!(
+                                    "--bands {}: the model's band {b} is not among them",
+                                    names.join(",")
+                                ),
+                            },
+                        )
                         .collect::<Result<_>>()?
                 }
             };
@@ -152,7 +163,14 @@ impl Input {
 
     /// Reflectance of the window (`x0`, `y0`, `cols`, `rows`), pixel after pixel, the model's bands
     /// in order for each (`rows × cols × bands` values; NaN = no data).
-    pub fn read(&mut self, x0: u32, y0: u32, cols: u32, rows: u32, out: &mut Vec<f32>) -> Result<()> {
+    pub fn read(
+        &mut self,
+        x0: u32,
+        y0: u32,
+        cols: u32,
+        rows: u32,
+        out: &mut Vec<f32>,
+    ) -> Result<()> {
         let n = (rows * cols) as usize;
         let nb = self.map.len();
         out.clear();

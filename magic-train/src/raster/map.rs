@@ -10,7 +10,9 @@
 use super::calibrate;
 use super::geo::{GeoRef, GDAL_METADATA, GDAL_NODATA};
 use super::input::Input;
-use super::pixel::{band_names, check_model, pixel, Outcome, PixelConfig, Scratch, N_OUT, N_VARIABLES};
+use super::pixel::{
+    band_names, check_model, pixel, Outcome, PixelConfig, Scratch, N_OUT, N_VARIABLES,
+};
 use super::scl::Scl;
 use super::writer::{Sample, StripWriter, TagValue, TiffSpec};
 use anyhow::{bail, Context, Result};
@@ -122,21 +124,32 @@ pub fn parse_date(s: &str) -> Result<f64> {
 }
 
 fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 /// GDAL's metadata XML: each band's description (its column name) and notes.
 fn gdal_metadata(names: &[String], notes: &[(Option<usize>, String, String)]) -> String {
     let mut x = String::from("<GDALMetadata>\n");
     for (k, v) in notes.iter().filter(|n| n.0.is_none()).map(|n| (&n.1, &n.2)) {
-        x.push_str(&format!("  <Item name=\"{}\">{}</Item>\n", xml_escape(k), xml_escape(v)));
+        x.push_str(&format!(
+            "  <Item name=\"{}\">{}</Item>\n",
+            xml_escape(k),
+            xml_escape(v)
+        ));
     }
     for (i, n) in names.iter().enumerate() {
         x.push_str(&format!(
             "  <Item name=\"DESCRIPTION\" sample=\"{i}\" role=\"description\">{}</Item>\n",
             xml_escape(n)
         ));
-        for (k, v) in notes.iter().filter(|n| n.0 == Some(i)).map(|n| (&n.1, &n.2)) {
+        for (k, v) in notes
+            .iter()
+            .filter(|n| n.0 == Some(i))
+            .map(|n| (&n.1, &n.2))
+        {
             x.push_str(&format!(
                 "  <Item name=\"{}\" sample=\"{i}\">{}</Item>\n",
                 xml_escape(k),
@@ -158,7 +171,9 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
     let bands = crate::records::model_channels(&model)?;
     let mut input = Input::open(&o.input, &bands, o.bands.as_deref(), o.offset)?;
     let [x0, y0, w, h] = o.window.unwrap_or([0, 0, input.width, input.height]);
-    if x0.checked_add(w).is_none_or(|e| e > input.width) || y0.checked_add(h).is_none_or(|e| e > input.height) {
+    if x0.checked_add(w).is_none_or(|e| e > input.width)
+        || y0.checked_add(h).is_none_or(|e| e > input.height)
+    {
         bail!(
             "--window {x0},{y0},{w},{h} is not inside the {}×{} image {}",
             input.width,
@@ -220,15 +235,35 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
 
     let names = band_names();
     let mut notes: Vec<(Option<usize>, String, String)> = vec![
-        (None, "MAGIC_MODEL".into(), o.model.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()),
-        (None, "MAGIC_RESIDUAL".into(), if o.residual { "computed" } else { "not computed (encoder only): residual_rms and *_sd are NaN" }.into()),
+        (
+            None,
+            "MAGIC_MODEL".into(),
+            o.model
+                .file_name()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        ),
+        (
+            None,
+            "MAGIC_RESIDUAL".into(),
+            if o.residual {
+                "computed"
+            } else {
+                "not computed (encoder only): residual_rms and *_sd are NaN"
+            }
+            .into(),
+        ),
     ];
     if let Some(d) = &o.date {
         notes.push((None, "ACQUISITION_DATE".into(), d.clone()));
     }
     if o.residual {
         for (k, f) in sd_factors.iter().enumerate() {
-            notes.push((Some(N_VARIABLES + 2 + k), "SD_CALIBRATION_FACTOR".into(), format!("{f}")));
+            notes.push((
+                Some(N_VARIABLES + 2 + k),
+                "SD_CALIBRATION_FACTOR".into(),
+                format!("{f}"),
+            ));
         }
     }
     let window_rows = o.window_rows.max(1);
@@ -237,7 +272,10 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
         bail!("{window_rows} rows per window: a multiple of {STRIP_ROWS} (or fewer) is needed");
     }
     let mut tags = geo.tags();
-    tags.push((GDAL_METADATA, TagValue::Ascii(gdal_metadata(&names, &notes))));
+    tags.push((
+        GDAL_METADATA,
+        TagValue::Ascii(gdal_metadata(&names, &notes)),
+    ));
     tags.push((GDAL_NODATA, TagValue::Ascii("nan".into())));
     let spec = TiffSpec {
         width: w,
@@ -265,8 +303,10 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
     let bar = if o.progress {
         let b = ProgressBar::new(w as u64 * h as u64);
         b.set_style(
-            ProgressStyle::with_template("{bar:40} {percent:>3}% {human_pos}/{human_len} px, {per_sec}, ETA {eta}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            ProgressStyle::with_template(
+                "{bar:40} {percent:>3}% {human_pos}/{human_len} px, {per_sec}, ETA {eta}",
+            )
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
         b
     } else {
@@ -288,7 +328,9 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
         let outcomes: Vec<Outcome> = obs
             .par_chunks(nb)
             .zip(pix.par_chunks_mut(N_OUT))
-            .map_init(Scratch::default, |s, (o, out)| pixel(&model, o, &cfg, s, out))
+            .map_init(Scratch::default, |s, (o, out)| {
+                pixel(&model, o, &cfg, s, out)
+            })
             .collect();
         summary.compute_seconds += t.elapsed().as_secs_f64();
         for oc in &outcomes {
@@ -319,8 +361,13 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
         .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", partial.display()))?
         .sync_all()
         .ok();
-    std::fs::rename(&partial, &o.output)
-        .with_context(|| format!("cannot rename {} to {}", partial.display(), o.output.display()))?;
+    std::fs::rename(&partial, &o.output).with_context(|| {
+        format!(
+            "cannot rename {} to {}",
+            partial.display(),
+            o.output.display()
+        )
+    })?;
     summary.pixels = w as u64 * h as u64;
     summary.sd_factors = if o.residual { sd_factors } else { vec![] };
     if let Some(png) = &o.preview {

@@ -109,7 +109,12 @@ pub fn pixel(
 
 /// The encoder alone: variables and the flags `AT_BOUND` and `MISSING` into `out`, with the
 /// checks of [`invert_at`] on the observations.
-fn encode(model: &Model<'_>, obs: &[f32], ws: &mut Workspace, out: &mut [f32]) -> Result<(), Error> {
+fn encode(
+    model: &Model<'_>,
+    obs: &[f32],
+    ws: &mut Workspace,
+    out: &mut [f32],
+) -> Result<(), Error> {
     let n_obs = model.n_obs();
     let p = model.n_params();
     if obs.len() != n_obs || n_obs > MAX_OBS || p > MAX_PARAMS || model.bounds.len() < p {

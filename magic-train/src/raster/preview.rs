@@ -43,11 +43,18 @@ static FONTS: Once = Once::new();
 pub fn render(map: &Path, band: &str, png: &Path) -> Result<()> {
     let names = band_names();
     let Some(b) = names.iter().position(|n| n == band) else {
-        bail!("--preview-band {band}: not a band of the map ({})", names.join(", "));
+        bail!(
+            "--preview-band {band}: not a band of the map ({})",
+            names.join(", ")
+        );
     };
     let mut r = Raster::open(map)?;
     if r.bands as usize != names.len() {
-        bail!("{}: {} bands, not a map of this version", map.display(), r.bands);
+        bail!(
+            "{}: {} bands, not a map of this version",
+            map.display(),
+            r.bands
+        );
     }
     let step = r.width.max(r.height).div_ceil(MAX_SIDE).max(1);
     let (w, h) = (r.width.div_ceil(step), r.height.div_ceil(step));
@@ -59,7 +66,10 @@ pub fn render(map: &Path, band: &str, png: &Path) -> Result<()> {
     }
     let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
     if finite.is_empty() {
-        bail!("{}: band {band} holds no value (all no data)", map.display());
+        bail!(
+            "{}: band {band} holds no value (all no data)",
+            map.display()
+        );
     }
     finite.sort_by(f64::total_cmp);
     let q = |p: f64| finite[((finite.len() - 1) as f64 * p).round() as usize];
@@ -85,8 +95,16 @@ pub fn render(map: &Path, band: &str, png: &Path) -> Result<()> {
             "{band} ({}×{} px{}{})",
             r.width,
             r.height,
-            if step > 1 { format!(", every {step}th shown") } else { String::new() },
-            if (zx, zy) != (1, 1) { format!(", each drawn {zx}×{zy}") } else { String::new() }
+            if step > 1 {
+                format!(", every {step}th shown")
+            } else {
+                String::new()
+            },
+            if (zx, zy) != (1, 1) {
+                format!(", each drawn {zx}×{zy}")
+            } else {
+                String::new()
+            }
         ),
         (margin as i32, 6),
         ("sans-serif", 16).into_font(),
@@ -94,7 +112,11 @@ pub fn render(map: &Path, band: &str, png: &Path) -> Result<()> {
     .map_err(|x| e(&x))?;
     for (i, v) in values.iter().enumerate() {
         let (x, y) = ((i as u32 % w) * zx, (i as u32 / w) * zy);
-        let c = if v.is_finite() { viridis((v - lo) / span) } else { RGBColor(200, 200, 200) };
+        let c = if v.is_finite() {
+            viridis((v - lo) / span)
+        } else {
+            RGBColor(200, 200, 200)
+        };
         let (x0, y0) = (margin as i32 + x as i32, top + y as i32);
         root.draw(&Rectangle::new(
             [(x0, y0), (x0 + zx as i32, y0 + zy as i32)],
@@ -107,7 +129,10 @@ pub fn render(map: &Path, band: &str, png: &Path) -> Result<()> {
     for k in 0..ih {
         let t = 1.0 - k as f64 / (ih.max(2) - 1) as f64;
         root.draw(&Rectangle::new(
-            [(bx, top + k as i32), (bx + bar_w as i32, top + k as i32 + 1)],
+            [
+                (bx, top + k as i32),
+                (bx + bar_w as i32, top + k as i32 + 1),
+            ],
             viridis(t).filled(),
         ))
         .map_err(|x| e(&x))?;

@@ -84,9 +84,22 @@ pub struct Raster {
     cache: HashMap<u32, DecodingResult>,
 }
 
-/// A `tiff` error with the file named.
+/// Largest number of bands (samples per pixel) accepted.
+pub const MAX_BANDS: u16 = 1024;
+
+/// A `tiff` error with the file named (the decoder's message cut to a readable length: some
+/// list every sample's bit depth).
 fn err(path: &Path, what: &str, e: impl std::fmt::Display) -> anyhow::Error {
-    anyhow!("{}: {what}: {e}", path.display())
+    let mut m = e.to_string();
+    if m.len() > 300 {
+        let cut = (0..=300)
+            .rev()
+            .find(|&i| m.is_char_boundary(i))
+            .unwrap_or(0);
+        m.truncate(cut);
+        m.push('…');
+    }
+    anyhow!("{}: {what}: {m}", path.display())
 }
 
 impl Raster {
@@ -130,6 +143,12 @@ impl Raster {
             .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
             .map_err(|e| err(path, "bad SampleFormat tag", e))?
             .unwrap_or_else(|| vec![1]);
+        if bands == 0 || bands > MAX_BANDS {
+            bail!(
+                "{}: {bands} samples per pixel (expected 1 to {MAX_BANDS} bands)",
+                path.display()
+            );
+        }
         let format = formats.first().copied().unwrap_or(1);
         if formats.iter().any(|&f| f != format) {
             bail!(
@@ -193,7 +212,11 @@ impl Raster {
         let per_plane = across * height.div_ceil(chunk.1);
         let planes = if planar { bands as u32 } else { 1 };
         let expected = per_plane as u64 * planes as u64;
-        let offsets = if tiled { Tag::TileOffsets } else { Tag::StripOffsets };
+        let offsets = if tiled {
+            Tag::TileOffsets
+        } else {
+            Tag::StripOffsets
+        };
         let counts = if tiled {
             Tag::TileByteCounts
         } else {
@@ -250,8 +273,19 @@ impl Raster {
     /// Reads band `band` (0-based sample index) over rows `y0..y0 + rows` and columns
     /// `x0..x0 + out.len() / rows`, as raw sample values in f64, row after row, into `out`.
     /// Chunks above `y0` are dropped from the cache (call with increasing `y0`).
-    pub fn read_band(&mut self, band: u16, x0: u32, y0: u32, rows: u32, out: &mut [f64]) -> Result<()> {
-        let cols = if rows == 0 { 0 } else { out.len() as u32 / rows };
+    pub fn read_band(
+        &mut self,
+        band: u16,
+        x0: u32,
+        y0: u32,
+        rows: u32,
+        out: &mut [f64],
+    ) -> Result<()> {
+        let cols = if rows == 0 {
+            0
+        } else {
+            out.len() as u32 / rows
+        };
         if band >= self.bands
             || rows == 0
             || cols == 0
@@ -270,7 +304,8 @@ impl Raster {
         }
         let (cw, ch) = self.chunk;
         let first_row = y0 / ch;
-        self.cache.retain(|&i, _| (i % self.per_plane) / self.across >= first_row);
+        self.cache
+            .retain(|&i, _| (i % self.per_plane) / self.across >= first_row);
         let plane = if self.planar { band as u32 } else { 0 };
         let stride = if self.planar { 1 } else { self.bands as usize };
         let sample = if self.planar { 0 } else { band as usize };
@@ -293,7 +328,11 @@ impl Raster {
                 let data = &self.cache[&idx];
                 // The chunk's own width (tiles at the right edge may be cut).
                 let (tx0, ty0) = (cx * cw, cy * ch);
-                let data_w = if self.tiled { cw.min(self.width - tx0) } else { self.width };
+                let data_w = if self.tiled {
+                    cw.min(self.width - tx0)
+                } else {
+                    self.width
+                };
                 let data_h = ch.min(self.height - ty0);
                 let need = data_w as usize * data_h as usize * stride;
                 let len = result_len(data);

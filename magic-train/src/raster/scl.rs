@@ -60,7 +60,15 @@ impl Scl {
 
     /// Masks the window: sets every band of each masked pixel of `obs` (pixel after pixel,
     /// `bands` values each) to NaN; returns how many pixels were masked.
-    pub fn apply(&mut self, x0: u32, y0: u32, cols: u32, rows: u32, bands: usize, obs: &mut [f32]) -> Result<usize> {
+    pub fn apply(
+        &mut self,
+        x0: u32,
+        y0: u32,
+        cols: u32,
+        rows: u32,
+        bands: usize,
+        obs: &mut [f32],
+    ) -> Result<usize> {
         let n = (rows * cols) as usize;
         self.scratch.resize(n, 0.0);
         self.raster.read_band(0, x0, y0, rows, &mut self.scratch)?;

@@ -63,7 +63,10 @@ pub fn magic(args: &[&str]) -> (bool, String) {
         .env("MAGIC_DATA", data())
         .output()
         .expect("running magic");
-    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 /// A small RTM model of `variant` (physical geometry, 300 training spectra, 2 epochs), encoded.
@@ -75,8 +78,15 @@ pub fn small_model(variant: RtmVariant, seed: u64) -> Vec<u8> {
         progress: false,
         ..TrainConfig::s2()
     };
-    let (m, _) = train_rtm(&s, &s.data.train.head(300), &s.data.valid.head(200), variant, &cfg, seed)
-        .unwrap();
+    let (m, _) = train_rtm(
+        &s,
+        &s.data.train.head(300),
+        &s.data.valid.head(200),
+        variant,
+        &cfg,
+        seed,
+    )
+    .unwrap();
     m.encode().unwrap()
 }
 
@@ -271,4 +281,29 @@ pub fn read_map(path: &Path) -> (u32, u32, Vec<Vec<f32>>) {
         })
         .collect();
     (w, h, bands)
+}
+
+/// The model the figures use: `MAGIC_MAP_MODEL` if set, else a C trained here as `magic train rtm
+/// --variant C --geometry physical --limit 2000 --epochs 3 --seed 1` would.
+pub fn figures_model() -> Vec<u8> {
+    if let Some(p) = std::env::var_os("MAGIC_MAP_MODEL") {
+        return std::fs::read(p).unwrap();
+    }
+    let d = data();
+    let s = RtmSetup::read(&d.join("s2"), &d.join("rtm"), Geometry::Physical).unwrap();
+    let cfg = TrainConfig {
+        epochs: 3,
+        progress: false,
+        ..TrainConfig::s2()
+    };
+    let (m, _) = train_rtm(
+        &s,
+        &s.data.train.head(2000),
+        &s.data.valid,
+        RtmVariant::C,
+        &cfg,
+        1,
+    )
+    .unwrap();
+    m.encode().unwrap()
 }
