@@ -340,22 +340,17 @@ fn diag_inverse(
     let not_pd = Error::OutOfRange {
         what: "curvature matrix not positive definite",
     };
+    let p = p.min(MAX_PARAMS);
     for j in 0..p {
-        let mut d = a[j][j];
-        for k in 0..j {
-            d -= a[j][k] * a[j][k];
-        }
+        let d = a[j][j] - a[j][..j].iter().map(|x| x * x).sum::<f64>();
         if !(d > 0.0 && d.is_finite()) {
             return Err(not_pd);
         }
         let l = d.sqrt();
         a[j][j] = l;
         for i in j + 1..p {
-            let mut s = a[i][j];
-            for k in 0..j {
-                s -= a[i][k] * a[j][k];
-            }
-            a[i][j] = s / l;
+            let dot: f64 = a[i][..j].iter().zip(&a[j][..j]).map(|(x, y)| x * y).sum();
+            a[i][j] = (a[i][j] - dot) / l;
         }
     }
     // diag(A⁻¹)_k = Σ_i (L⁻¹)_{ik}²: column k of L⁻¹ by forward substitution.

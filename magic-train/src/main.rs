@@ -342,7 +342,7 @@ enum Cmd {
         #[arg(long)]
         scl: Option<PathBuf>,
         /// Run INFORM and the correction for every pixel: residual, flags and standard
-        /// deviations (about ten times the cost of the encoder alone).
+        /// deviations (hundreds of times the cost of the encoder alone).
         #[arg(long)]
         residual: bool,
         /// Acquisition date YYYY-MM-DD (needed by models with the illumination effect).

@@ -247,7 +247,7 @@ fn fuzz_geotiff_reader() {
     let (tx, rx) = mpsc::channel::<Result<f64, (u64, Vec<u8>)>>();
     let (p, o, d) = (progress.clone(), opened.clone(), dir.clone());
     let case_input = move |i: u64| mutate(&mut Rng(seed ^ i.wrapping_mul(0xE703_7ED1_A0B4_28DB)));
-    let gen = case_input.clone();
+    let gen = case_input;
     let start = Instant::now();
     std::thread::spawn(move || {
         let path = d.join("case.tif");

@@ -127,9 +127,10 @@ fn standard_deviations_are_positive_and_refuse_bad_input() {
 }
 
 /// Shares of true values within ±1 / ±2 calibrated sd that the test accepts: the nominal 68.3 %
-/// within ±1 (the calibration's target, on other spectra: binomial and calibration sampling
-/// error about ±1.5 % each at 2 000 spectra) and, at least, 85 % within ±2.
-const ONE_SD: (f64, f64) = (0.63, 0.74);
+/// within ±1 (the calibration's target, measured 64.3–70.1 % on other spectra; binomial and
+/// calibration sampling error about 1–1.5 points each at 2 000 spectra, so ±8 points is over three
+/// combined standard errors) and at least 85 % within ±2 (measured 89.7–99.7 %).
+const ONE_SD: (f64, f64) = (0.60, 0.76);
 const TWO_SD_MIN: f64 = 0.85;
 
 #[test]

@@ -100,9 +100,8 @@ pub fn simulate(
     let mut out = Vec::with_capacity(n);
     for _ in 0..n {
         let mut truth = [0.0; N_VARIABLES];
-        for k in 0..p {
-            let [lo, hi] = model.bounds[k];
-            truth[k] = lo as f64 + (hi - lo) as f64 * rng.random::<f64>();
+        for (t, [lo, hi]) in truth.iter_mut().zip(&model.bounds[..p]) {
+            *t = *lo as f64 + (hi - lo) as f64 * rng.random::<f64>();
         }
         let (cd, h) = crown_from_cover(truth[p - 1], fixed.sd);
         truth[p] = cd;
@@ -142,8 +141,8 @@ pub fn normalised_errors(
                 let inv = invert_at::<f64>(model, &s.obs, t_day, ws).ok()?;
                 let u = standard_deviations(model, &s.obs, &inv, t_day, sw).ok()?;
                 let mut e = [0.0; N_VARIABLES];
-                for k in 0..N_VARIABLES {
-                    e[k] = (inv.params[k] - s.truth[k]) / u.sd[k];
+                for (k, ek) in e.iter_mut().enumerate() {
+                    *ek = (inv.params[k] - s.truth[k]) / u.sd[k];
                 }
                 e.iter().all(|v| v.is_finite()).then_some(e)
             },

@@ -268,7 +268,7 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
     }
     let window_rows = o.window_rows.max(1);
     let strip_rows = STRIP_ROWS.min(window_rows);
-    if window_rows % strip_rows != 0 {
+    if !window_rows.is_multiple_of(strip_rows) {
         bail!("{window_rows} rows per window: a multiple of {STRIP_ROWS} (or fewer) is needed");
     }
     let mut tags = geo.tags();

@@ -281,11 +281,7 @@ impl Raster {
         rows: u32,
         out: &mut [f64],
     ) -> Result<()> {
-        let cols = if rows == 0 {
-            0
-        } else {
-            out.len() as u32 / rows
-        };
+        let cols = (out.len() as u32).checked_div(rows).unwrap_or(0);
         if band >= self.bands
             || rows == 0
             || cols == 0

@@ -194,7 +194,7 @@ impl<W: Write + Seek> StripWriter<W> {
                 s.height
             );
         };
-        if rows % rps != 0 && end != s.height {
+        if !rows.is_multiple_of(rps) && end != s.height {
             bail!("{rows} rows are not a whole number of {rps}-row strips");
         }
         let expected = rows as usize * w * b * size;

@@ -142,7 +142,7 @@ impl Scene {
             for b in 0..nb {
                 let refl = t.rows.x[i][b] as f64 * d.scale[b] + d.mean[b];
                 let v = ((refl * 10_000.0).round() - OFFSET).clamp(1.0, 65_535.0);
-                dn[(b * h as usize + y as usize) * w as usize + x as usize] = v as u16;
+                dn[(b * h as usize + y) * w as usize + x] = v as u16;
             }
         }
         Scene {
