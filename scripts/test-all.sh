@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Runs every test of the workspace, the firmware under QEMU included, then the Python package's
 # pytest suite.
-# Installs what the firmware tests need when it is missing: the Cortex-M4F Rust target, the LLVM
-# tools (for size figures) and qemu-system-arm (Debian/Ubuntu: apt-get); and what the Python
-# package needs (pip): maturin, pytest, numpy, xarray, dask, distributed, zarr.
+# Installs what the tests need when it is missing: the Cortex-M4F Rust target, the LLVM tools (for
+# size figures), qemu-system-arm and GDAL's command-line tools (Debian/Ubuntu: apt-get); and what
+# the Python package needs (pip): maturin, pytest, numpy, xarray, dask, distributed, zarr.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -21,6 +21,15 @@ if ! command -v qemu-system-arm >/dev/null 2>&1; then
     if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
     $SUDO apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq qemu-system-arm >/dev/null
+fi
+
+if ! command -v gdalinfo >/dev/null 2>&1 || ! command -v gdal_translate >/dev/null 2>&1; then
+    # The map tests open their GeoTIFFs in GDAL and make the input layouts with it.
+    echo "installing gdal-bin" >&2
+    SUDO=""
+    if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq gdal-bin >/dev/null
 fi
 
 PYTHON="${PYTHON:-python3}"

@@ -16,6 +16,8 @@
 //! * [`model_file`] — the exported model, decoded without allocation;
 //! * [`sun`] — the sun's zenith and azimuth from date, time and place (illumination geometry);
 //! * [`invert`](mod@invert) — observations to variables, reconstruction, residual and quality flags.
+//! * [`uncertainty`] — standard deviations of the inverted variables (local curvature at the
+//!   solution, exact Jacobian).
 #![no_std]
 #![deny(missing_docs)]
 // `unsafe` is denied everywhere except the Armv7E-M int8 kernel (`quant::dsp`, feature `dsp`,
@@ -30,6 +32,7 @@ pub mod real;
 pub mod rtm;
 pub mod sun;
 pub mod time;
+pub mod uncertainty;
 
 pub use error::{BoundFault, EffectFault, Error, LayerArray, LayerFault, MessageSink, Net};
 pub use real::{Dual, Real};

@@ -10,6 +10,7 @@ pub mod export;
 pub mod forward;
 pub mod invert;
 pub mod lai;
+pub mod map;
 pub mod missing;
 pub mod reproduce;
 pub mod residuals;
@@ -66,6 +67,10 @@ pub enum Cmd {
     SynthCheck(synth::SynthCheckCmd),
     /// The loop on synthetic data: one dataset per scenario, what it added, MSE before and after.
     SynthLoop(synth::SynthLoopCmd),
+    /// Map the forest variables of a Sentinel-2 image (RTM model, variant B or C): GeoTIFF in,
+    /// float32 GeoTIFF out with one band per column of `magic invert` (the variables,
+    /// `residual_rms`, `flags`), then one standard-deviation band per variable (`<name>_sd`).
+    Map(map::MapCmd),
     /// Retrieved LAI of a forest model against the SNAP LAI of the site extract.
     Lai(lai::LaiCmd),
     /// Inversion with stations down.
@@ -92,6 +97,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Cmd::Synth(a) => synth::synth(a),
         Cmd::SynthCheck(a) => synth::check(a),
         Cmd::SynthLoop(a) => synth::run_loop(a),
+        Cmd::Map(a) => map::run(a),
         Cmd::Lai(a) => lai::run(a),
         Cmd::Missing(a) => missing::run(a),
         Cmd::Classical(a) => classical::run(a),
