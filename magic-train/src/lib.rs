@@ -16,6 +16,7 @@ pub mod physics;
 pub mod pipeline;
 pub mod plots;
 pub mod qemu;
+pub mod qemu_uart;
 pub mod records;
 pub mod reproduce;
 pub mod residuals;
@@ -24,6 +25,7 @@ pub mod rtm_loop;
 pub mod rtm_physics;
 pub mod rtm_pipeline;
 pub mod rtm_residuals;
+pub mod station;
 pub mod synth;
 pub mod train;
 

@@ -108,6 +108,24 @@ enum Cmd {
         #[arg(long)]
         standardized: bool,
     },
+    /// Talk to a board running the deployable firmware (or QEMU): upload a model, stream days.
+    Station {
+        /// `tcp:HOST:PORT` (QEMU's `-serial tcp::PORT,server`) or a serial device (`/dev/ttyUSB0`).
+        #[arg(long)]
+        port: String,
+        /// Model file (int8, from `magic export`): uploaded unless the board runs it already.
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Observation CSV, as for `magic invert` (needs --model).
+        #[arg(long)]
+        days: Option<PathBuf>,
+        /// Result CSV: the date, the model id, then `magic invert`'s columns (default: stdout).
+        #[arg(long)]
+        output: Option<PathBuf>,
+        /// The days hold standardised values.
+        #[arg(long)]
+        standardized: bool,
+    },
     /// Evaluate a forward model.
     Forward {
         #[command(subcommand)]
@@ -605,6 +623,19 @@ fn run(cli: Cli) -> Result<()> {
                 );
             }
         }
+        Cmd::Station {
+            port,
+            model,
+            days,
+            output,
+            standardized,
+        } => magic_train::station::run_cli(&magic_train::station::Options {
+            port,
+            model,
+            days,
+            output,
+            standardized,
+        })?,
         Cmd::Forward {
             problem:
                 ForwardProblem::Mogi {

@@ -116,8 +116,8 @@ fn rustc() -> String {
 }
 
 /// Builds started from this process run one after the other: cargo writes the firmware's ELF to
-/// the same path whatever the model.
-static BUILD: Mutex<()> = Mutex::new(());
+/// the same path whatever the model (and whichever build: see also `qemu_uart`).
+pub static BUILD: Mutex<()> = Mutex::new(());
 
 /// The firmware features a model needs: `rtm` for an RTM model (the default firmware links only
 /// the Mogi forward model and holds the 48 KiB budget). A file that does not decode gets the
@@ -185,13 +185,13 @@ pub fn build_firmware_with(model_path: &Path, extra_features: &[&str]) -> Result
 }
 
 /// The executable of the `magic-firmware` bin from cargo's JSON messages.
-fn artifact_path(json_lines: &str) -> Option<PathBuf> {
+pub fn artifact_path(json_lines: &str) -> Option<PathBuf> {
     json_lines
         .lines()
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
         .filter(|v| v["reason"] == "compiler-artifact" && v["target"]["name"] == "magic-firmware")
         .filter_map(|v| v["executable"].as_str().map(PathBuf::from))
-        .last()
+        .next_back()
 }
 
 fn fnv1a(b: &[u8]) -> u64 {
