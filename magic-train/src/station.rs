@@ -331,6 +331,9 @@ impl Station {
                 bytes = 0;
             } else if line.starts_with("!model,") {
                 t.events.push((at, Event::UploadAbandoned(line)));
+            } else if line.starts_with("!error,input overrun") {
+                // Bytes of the lines in flight were lost: answers no longer match lines.
+                bail!("the board lost input ({line}); the station sent more than rx= ahead");
             } else if line.starts_with('!') {
                 t.events.push((at, Event::Other(line)));
             } else {

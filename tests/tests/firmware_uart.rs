@@ -95,7 +95,8 @@ fn with_version(bytes: &[u8], v: u16) -> Vec<u8> {
     b
 }
 
-/// `DAYS` observation rows in mm (the synthetic dataset's days, cycled, at 0.01 mm), written as a
+/// `DAYS` observation rows in mm (the synthetic dataset's days, cycled, at 0.1 mm: finer than GNSS
+/// daily noise of about 1 mm, and short lines for the slow emulated UART), written as a
 /// CSV with the network's columns and read back as `magic invert` reads it.
 fn days(model: &Model<'_>, name: &str) -> (PathBuf, Vec<ObsRow>) {
     let s = synth::generate(synth::Scenario::Clean, 1);
@@ -118,7 +119,7 @@ fn days(model: &Model<'_>, name: &str) -> (PathBuf, Vec<ObsRow>) {
                 if z.is_nan() {
                     String::new()
                 } else {
-                    format!("{:.2}", z as f64 * d.scale[c] + d.mean[c])
+                    format!("{:.1}", z as f64 * d.scale[c] + d.mean[c])
                 }
             })
             .collect();
@@ -500,6 +501,48 @@ fn resets_keep_the_last_model_and_the_watchdog_resets_a_hung_board() {
         .all(|a| board_answer(a).starts_with("model,")));
     let s = st.reset().expect("reset");
     check(&s, &c, 0, "command");
+    assert!(answered_by(&mut st).iter().all(|&x| x == id(&c)));
+
+    // Malformed commands and upload lines: an error answer each, C still running.
+    let c_id = format!("{:08x}", id(&c));
+    let cases = [
+        (
+            "!model 18899".to_string(),
+            "model,error,usage: !model <size in bytes> <CRC-32, 8 hex digits>".to_string(),
+        ),
+        (
+            "!model 10 0badc0de".into(),
+            "model,error,a model file has at least 14 bytes, not 10".into(),
+        ),
+        (
+            ":00ff".into(),
+            "model,error,model data without !model".into(),
+        ),
+        (
+            format!("!model {} {c_id}", c.len()),
+            format!("model,ready,{}", c.len()),
+        ),
+        (
+            ":0ff".into(),
+            "model,error,model data is not an even number of hex digits".into(),
+        ),
+        ("!frobnicate".into(), "error,unknown command".into()),
+        (
+            "1".repeat(1500),
+            format!("{c_id},error,line longer than 1024 bytes"),
+        ),
+    ];
+    let items: Vec<Item> = cases.iter().map(|(l, _)| Item::Line(l.clone())).collect();
+    let t = st.run(&items).unwrap();
+    for ((line, want), got) in cases.iter().zip(&t.answers) {
+        assert_eq!(
+            board_answer(got),
+            want,
+            "answer to {}",
+            &line[..line.len().min(40)]
+        );
+    }
+    assert!(t.events.is_empty(), "{:?}", t.events);
     assert!(answered_by(&mut st).iter().all(|&x| x == id(&c)));
 
     // A hung board: the watchdog resets it (NMI after 1 s without feeding, reset after 2 s);
