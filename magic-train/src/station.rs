@@ -401,6 +401,15 @@ pub fn model_id(bytes: &[u8]) -> Option<u32> {
 
 /// The lines that upload a model: `!model <size> <id>`, then `:<hex>` lines of
 /// [`UPLOAD_BYTES_PER_LINE`] bytes.
+///
+/// ```
+/// let mut model = vec![0u8; 70];
+/// model[66..].copy_from_slice(&0x7921_866bu32.to_le_bytes()); // its CRC-32, the id
+/// let lines = magic_train::station::upload_lines(&model);
+/// assert_eq!(lines[0], "!model 70 7921866b");
+/// assert_eq!(lines.len(), 3); // 64 bytes, then 6
+/// assert_eq!(lines[2], ":00006b862179");
+/// ```
 pub fn upload_lines(model: &[u8]) -> Vec<String> {
     let id = model_id(model).unwrap_or(0);
     let mut lines = vec![format!("!model {} {id:08x}", model.len())];
@@ -417,6 +426,13 @@ pub fn upload_lines(model: &[u8]) -> Vec<String> {
 
 /// Splits a day answer `<id>,<result>` into the model id and the result line (as `magic invert`
 /// writes it); `None` for `none,…` (no model) or a line of another kind.
+///
+/// ```
+/// use magic_train::station::split_answer;
+/// let a = "7921866b,2.580113,0.893687,11.237006,-0.559353,1.808878,0,4095";
+/// assert_eq!(split_answer(a).map(|(id, _)| id), Some(0x7921_866b));
+/// assert_eq!(split_answer("none,error,no model: upload one with !model"), None);
+/// ```
 pub fn split_answer(line: &str) -> Option<(u32, &str)> {
     let (id, rest) = line.split_once(',')?;
     if id.len() != 8 {
