@@ -14,6 +14,7 @@ pub mod map;
 pub mod missing;
 pub mod reproduce;
 pub mod residuals;
+pub mod station;
 pub mod synth;
 pub mod tenv3;
 pub mod train;
@@ -50,6 +51,8 @@ pub enum Cmd {
     Invert(invert::RowsArgs),
     /// Build the firmware with a model and invert observations on it under QEMU.
     Qemu(invert::RowsArgs),
+    /// Talk to a board running the deployable firmware (or QEMU): upload a model, stream days.
+    Station(station::StationCmd),
     /// Evaluate a forward model.
     #[command(subcommand)]
     Forward(forward::ForwardCmd),
@@ -90,6 +93,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Cmd::Export(a) => export::run(a),
         Cmd::Invert(a) => invert::invert(a),
         Cmd::Qemu(a) => invert::qemu(a),
+        Cmd::Station(a) => station::run(a),
         Cmd::Forward(a) => forward::run(a),
         Cmd::Residuals(a) => residuals::run(a),
         Cmd::Loop(a) => closed_loop::run(a),
