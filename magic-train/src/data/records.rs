@@ -78,10 +78,8 @@ pub fn read_obs(path: &Path, model: &Model<'_>, standardized: bool) -> Result<Ve
                     };
                     if v.abs() > magic_core::invert::MAX_ABS_OBS {
                         err = Some(format!(
-                            "{}:{}:{}: column `{}`: {v} mm is beyond 10 m",
-                            t.path,
-                            t.line(r),
-                            c + 1,
+                            "{}: column `{}`: {v} mm is beyond 10 m",
+                            t.at(r, c),
                             t.header[c]
                         ));
                         break;

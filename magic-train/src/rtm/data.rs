@@ -81,20 +81,16 @@ fn read_split(t: &Table) -> Result<Split> {
         let sid = t.num(r, id, false)?;
         if sid < 0.0 || sid.fract() != 0.0 {
             bail!(
-                "{}:{}:{}: column `sample_id`: expected a non-negative integer, found `{}`",
-                t.path,
-                t.line(r),
-                id + 1,
+                "{}: column `sample_id`: expected a non-negative integer, found `{}`",
+                t.at(r, id),
                 t.text(r, id)
             );
         }
         let d = t.text(r, date);
         if magic_core::time::parse_date(d).is_none() {
             bail!(
-                "{}:{}:{}: column `date`: expected YYYY.MM.DD, found `{d}`",
-                t.path,
-                t.line(r),
-                date + 1
+                "{}: column `date`: expected YYYY.MM.DD, found `{d}`",
+                t.at(r, date)
             );
         }
         s.x.push(row);
