@@ -258,7 +258,7 @@ pub fn fit(
 /// by Levenberg–Marquardt and returns the fit with the lowest cost.
 ///
 /// ```
-/// use magic_train::lsq::{fit_grid, Grid, Options, Problem};
+/// use magic_train::gnss::lsq::{fit_grid, Grid, Options, Problem};
 /// use magic_core::mogi::{field, Station, PAPER_BOUNDS};
 /// let stations: [Station; 4] = core::array::from_fn(|i| Station {
 ///     x_km: [-5.0, 6.0, 1.0, 9.0][i], y_km: [3.0, -2.0, 6.0, 1.0][i], z_km: 0.0,
