@@ -42,12 +42,21 @@ if [ ${#missing[@]} -gt 0 ]; then
     "$PYTHON" -m pip install --quiet "${missing[@]}"
 fi
 
+# Style gates: formatting first (instant), lints and docs after the tests.
+rustup component list --installed | grep -q '^rustfmt' || rustup component add rustfmt
+rustup component list --installed | grep -q '^clippy' || rustup component add clippy
+cargo fmt --all --check
+
 # Release profile: the oracle tests run ten thousand spectra and the training tests train.
 cargo test --workspace --release "$@"
 
+# Every warning of clippy and rustdoc is an error (every member, the Python crate included).
+cargo clippy --workspace --all-targets --release -- -D warnings
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --release
+
 # The Python package: the wheel (built in the workspace's target directory), installed, and its
 # tests, which train tiny models with the `magic` binary and compare against it.
-cargo build --release -p magic-train --bin magic
+cargo build --release --workspace --bin magic
 wheels=target/wheels/magic-py
 rm -rf "$wheels"
 "$PYTHON" -m maturin build --release --manifest-path magic-py/Cargo.toml --out "$wheels"

@@ -268,11 +268,11 @@ pub fn standard_deviations(
     let mut out = Uncertainty {
         n_params: inv.n_params.min(MAX_PARAMS),
         sd: [f64::NAN; MAX_PARAMS],
-        residual_sd: s2.sqrt(),
+        residual_sd: libm::sqrt(s2),
         dof,
     };
     for k in 0..p {
-        out.sd[k] = range[k] * var[k].sqrt();
+        out.sd[k] = range[k] * libm::sqrt(var[k]);
     }
     // Derived RTM variables: crown diameter and height from fc.
     if let (Problem::Rtm { fixed, .. }, true) = (&model.problem, inv.n_params >= p + 2) {
@@ -311,7 +311,7 @@ fn correction_jacobian(model: &Model<'_>, p: usize, sw: &mut SdWorkspace) -> Res
             let v = sw.jac[i][k] / scale(model, i)?;
             norm += v * v;
         }
-        let norm = norm.sqrt();
+        let norm = libm::sqrt(norm);
         if norm == 0.0 {
             continue;
         }
@@ -346,7 +346,7 @@ fn diag_inverse(
         if !(d > 0.0 && d.is_finite()) {
             return Err(not_pd);
         }
-        let l = d.sqrt();
+        let l = libm::sqrt(d);
         a[j][j] = l;
         for i in j + 1..p {
             let dot: f64 = a[i][..j].iter().zip(&a[j][..j]).map(|(x, y)| x * y).sum();

@@ -121,7 +121,10 @@ pub fn magic_bin() -> PathBuf {
             .to_string();
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = std::process::Command::new(cargo);
-        cmd.args(["build", "--quiet", "-p", "magic-train", "--bin", "magic"]);
+        // `--workspace`: features unified as in `cargo test --workspace` (scripts/test-all.sh),
+        // so the binary reuses the tests' dependencies instead of building them again with
+        // magic-train's features alone.
+        cmd.args(["build", "--quiet", "--workspace", "--bin", "magic"]);
         match profile.as_str() {
             "debug" => {}
             "release" => {

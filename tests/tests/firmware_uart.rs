@@ -17,9 +17,9 @@
 //! them the tests fail with a message saying how to install them, unless `MAGIC_SKIP_QEMU=1`.
 
 use magic_core::{Flags, Model, Variant};
+use magic_train::data::records::{self, ObsRow};
 use magic_train::firmware::qemu::{build_firmware, ensure_toolchain, run_firmware};
 use magic_train::firmware::qemu_uart::{build_deployable, semihosting_calls, UartQemu};
-use magic_train::data::records::{self, ObsRow};
 use magic_train::firmware::station::{self, Answer, BoardStatus, Event, Item, Link, Station};
 use magic_train::gnss::synth;
 use std::collections::BTreeMap;

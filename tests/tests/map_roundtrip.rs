@@ -13,10 +13,10 @@
 mod map_common;
 
 use magic_core::{invert_at, Model, Workspace};
+use magic_train::data::records::model_channels;
 use magic_train::raster::map::{self, MapOptions};
 use magic_train::raster::pixel::{band_names, N_OUT, N_VARIABLES};
 use magic_train::raster::writer::{Sample, StripWriter, TiffSpec};
-use magic_train::data::records::model_channels;
 use magic_train::ModelKind;
 use map_common::*;
 use std::path::{Path, PathBuf};

@@ -30,6 +30,9 @@ const F32_ROWS_MAX_ERROR: f64 = 4e-8;
 const F32_RECON_MAX_ERROR: f64 = 7e-7;
 /// `magic forward rtm` against the oracle file: measured 3.0e-14.
 const CLI_FORWARD_MAX_ERROR: f64 = 4e-13;
+/// `magic forward prosail` against the prosail package's file (the four factors, printed with
+/// 17 significant digits): measured 9.1e-14 (the core's own error against it, see rtm_oracle).
+const CLI_PROSAIL_MAX_ERROR: f64 = 1e-12;
 /// The board's variables (printed with 6 decimals) against the host's, relative to
 /// max(|host|, 0.01): measured 3.9e-5 and 3.7e-5 (f32 INFORM and the printing).
 const BOARD_MAX_REL_ERROR: f64 = 4e-4;
@@ -267,18 +270,31 @@ fn corrupt_and_inconsistent_rtm_files_are_errors() {
     assert!(e.contains("physical geometry"), "{e}");
 }
 
-#[test]
-fn forward_rtm_command_matches_the_oracle() {
+/// Runs `magic forward <model>` (with `extra` arguments) on the first `rows` rows of an oracle
+/// file and returns the largest difference from the file over the output columns it writes,
+/// checking one output row per input row, the `sample_id`s and the header `want`.
+fn forward_command_error(
+    model: &str,
+    oracle: &str,
+    rows: usize,
+    extra: &[&str],
+    want: &[String],
+) -> f64 {
     let d = data_dir();
-    let oracle = d.join("oracle/rtm_inform_s2_10k.csv");
-    let text = std::fs::read_to_string(&oracle).unwrap();
-    let head: String = text.lines().take(301).map(|l| format!("{l}\n")).collect();
-    let dir = std::env::temp_dir().join(format!("magic-rtm-forward-{}", std::process::id()));
+    let text = std::fs::read_to_string(d.join("oracle").join(oracle)).unwrap();
+    let head: String = text
+        .lines()
+        .take(rows + 1)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let dir = std::env::temp_dir().join(format!("magic-{model}-forward-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let (input, output) = (dir.join("in.csv"), dir.join("out.csv"));
     std::fs::write(&input, &head).unwrap();
     let status = std::process::Command::new(magic_tests::magic_bin())
-        .args(["forward", "rtm", "--geometry", "reference", "--input"])
+        .args(["forward", model])
+        .args(extra)
+        .arg("--input")
         .arg(&input)
         .arg("--output")
         .arg(&output)
@@ -286,39 +302,68 @@ fn forward_rtm_command_matches_the_oracle() {
         .arg(d.join("rtm"))
         .status()
         .unwrap();
-    assert!(status.success());
-    let want = csv::Reader::from_path(&input)
-        .unwrap()
-        .into_records()
-        .map(|r| r.unwrap())
-        .collect::<Vec<_>>();
+    assert!(status.success(), "magic forward {model}");
+    let mut rdr = csv::Reader::from_path(&input).unwrap();
+    let want_header = rdr.headers().unwrap().clone();
+    let expected: Vec<_> = rdr.into_records().map(|r| r.unwrap()).collect();
     let mut rdr = csv::Reader::from_path(&output).unwrap();
     let header = rdr.headers().unwrap().clone();
-    let want_header = csv::Reader::from_path(&input)
-        .unwrap()
-        .headers()
-        .unwrap()
-        .clone();
     let got: Vec<_> = rdr.into_records().map(|r| r.unwrap()).collect();
-    assert_eq!(got.len(), 300);
-    let bands = magic_core::rtm::S2_BANDS;
-    assert_eq!(header.iter().skip(1).collect::<Vec<_>>(), bands.to_vec());
+    assert_eq!(got.len(), rows, "one output row per input row");
+    assert_eq!(
+        header.iter().skip(1).collect::<Vec<_>>(),
+        want.iter().map(|s| s.as_str()).collect::<Vec<_>>()
+    );
     let mut worst = 0f64;
-    for (g, w) in got.iter().zip(&want) {
+    for (g, w) in got.iter().zip(&expected) {
         assert_eq!(&g[0], &w[0], "sample_id");
-        for (k, b) in bands.iter().enumerate() {
-            let c = want_header.iter().position(|h| h == *b).unwrap();
+        for (k, name) in want.iter().enumerate() {
+            let c = want_header.iter().position(|h| h == name).unwrap();
             let a: f64 = g[k + 1].parse().unwrap();
             let e: f64 = w[c].parse().unwrap();
             worst = worst.max((a - e).abs());
         }
     }
+    let _ = std::fs::remove_dir_all(&dir);
+    worst
+}
+
+#[test]
+fn forward_rtm_command_matches_the_oracle() {
+    let bands: Vec<String> = magic_core::rtm::S2_BANDS
+        .iter()
+        .map(|b| b.to_string())
+        .collect();
+    let worst = forward_command_error(
+        "rtm",
+        "rtm_inform_s2_10k.csv",
+        300,
+        &["--geometry", "reference"],
+        &bands,
+    );
     eprintln!("forward rtm vs oracle: {worst:.2e}");
     assert!(
         worst <= CLI_FORWARD_MAX_ERROR,
         "forward rtm vs oracle: {worst}"
     );
-    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn forward_prosail_command_matches_the_prosail_package() {
+    let names: Vec<String> = magic_core::rtm::prosail::FACTOR_NAMES
+        .iter()
+        .flat_map(|f| {
+            magic_core::rtm::S2_BANDS
+                .iter()
+                .map(move |b| format!("{f}_{b}"))
+        })
+        .collect();
+    let worst = forward_command_error("prosail", "sail_4sail_s2_1k.csv", 300, &[], &names);
+    eprintln!("forward prosail vs the prosail package: {worst:.2e}");
+    assert!(
+        worst <= CLI_PROSAIL_MAX_ERROR,
+        "forward prosail vs the prosail package: {worst}"
+    );
 }
 
 /// The board's variables (`got`, a result line parsed) against the host's inversion, relative to

@@ -7,6 +7,7 @@ use crate::gnss::Network;
 use crate::rtm::{GeometryArg, RtmTables};
 use anyhow::{bail, Result};
 use clap::Subcommand;
+use magic_core::rtm::prosail::{self, Prosail};
 use magic_core::rtm::{INPUT_NAMES, N_BANDS, N_INPUTS, S2_BANDS};
 use std::path::{Path, PathBuf};
 
@@ -39,6 +40,22 @@ pub enum ForwardCmd {
         /// Geometry mode.
         #[arg(long, value_enum, default_value = "reference")]
         geometry: GeometryArg,
+        /// Tables folder (default: `$MAGIC_DATA/rtm` or `../shared/data/rtm`).
+        #[arg(long)]
+        tables: Option<PathBuf>,
+    },
+    /// PROSAIL (PROSPECT-D leaves in one 4SAIL layer over a soil): the four reflectance factors
+    /// in the 13 Sentinel-2 bands for rows of its 14 inputs (columns named as in
+    /// `oracle/sail_4sail_s2_1k.csv`: `N, cab, car, anth, cbrown, cw, cm, lai, ala, hspot, tts,
+    /// tto, psi, psoil`; angles in degrees).
+    Prosail {
+        /// Input CSV.
+        #[arg(long)]
+        input: PathBuf,
+        /// Output CSV (`rsot_B01` … `rddt_B12`: factor by factor, band by band; `sample_id`
+        /// first when the input has one).
+        #[arg(long)]
+        output: PathBuf,
         /// Tables folder (default: `$MAGIC_DATA/rtm` or `../shared/data/rtm`).
         #[arg(long)]
         tables: Option<PathBuf>,
@@ -140,6 +157,25 @@ pub fn run(cmd: &ForwardCmd) -> Result<()> {
                 let x: [f64; N_INPUTS] = x.try_into().map_err(|_| anyhow::anyhow!("inputs"))?;
                 let y = model.forward(&x, g)?;
                 Ok(y[..N_BANDS].to_vec())
+            })
+        }
+        ForwardCmd::Prosail {
+            input,
+            output,
+            tables,
+        } => {
+            let dir = crate::data::require(tables.as_deref(), "rtm", "RTM tables", "--tables")?;
+            let t = RtmTables::read(&dir)?;
+            let core = t.tables();
+            let model = Prosail::new(&core)?;
+            let header: Vec<String> = prosail::FACTOR_NAMES
+                .iter()
+                .flat_map(|f| S2_BANDS.iter().map(move |b| format!("{f}_{b}")))
+                .collect();
+            rows(input, output, &prosail::INPUT_NAMES, &header, &|x| {
+                let x: [f64; prosail::N_INPUTS] =
+                    x.try_into().map_err(|_| anyhow::anyhow!("inputs"))?;
+                Ok(model.forward(&x)?.iter().flatten().copied().collect())
             })
         }
     }

@@ -95,7 +95,9 @@ impl UartQemu {
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
-            .context("starting qemu-system-arm (see magic_train::firmware::qemu::ensure_toolchain)")?;
+            .context(
+                "starting qemu-system-arm (see magic_train::firmware::qemu::ensure_toolchain)",
+            )?;
         Ok(UartQemu { child, port })
     }
 
