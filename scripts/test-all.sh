@@ -56,7 +56,7 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --release
 
 # The Python package: the wheel (built in the workspace's target directory), installed, and its
 # tests, which train tiny models with the `magic` binary and compare against it.
-cargo build --release --workspace --bin magic
+cargo build --release --workspace --bins --tests
 wheels=target/wheels/magic-py
 rm -rf "$wheels"
 "$PYTHON" -m maturin build --release --manifest-path magic-py/Cargo.toml --out "$wheels"

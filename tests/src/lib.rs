@@ -121,10 +121,10 @@ pub fn magic_bin() -> PathBuf {
             .to_string();
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = std::process::Command::new(cargo);
-        // `--workspace`: features unified as in `cargo test --workspace` (scripts/test-all.sh),
-        // so the binary reuses the tests' dependencies instead of building them again with
-        // magic-train's features alone.
-        cmd.args(["build", "--quiet", "--workspace", "--bin", "magic"]);
+        // The workspace's bins and tests: features unified (dev-dependencies included) as in
+        // `cargo test --workspace` (scripts/test-all.sh), so the binary reuses the tests'
+        // dependencies instead of building them again with magic-train's features alone.
+        cmd.args(["build", "--quiet", "--workspace", "--bins", "--tests"]);
         match profile.as_str() {
             "debug" => {}
             "release" => {
