@@ -177,21 +177,69 @@ pub struct Reconstruction<'a> {
     pub smooth_mean: bool,
 }
 
-/// Validation MSE of the final reconstruction (standardised units), in chunks of 1 024 rows.
+/// Validation MSE of the final reconstruction (standardised units, over the observed channels),
+/// in chunks of 1 024 rows.
 pub fn valid_mse(net: &Net, data: Rows<'_>) -> Result<f64> {
     let n = data.x.first().map_or(0, |r| r.len());
     let mut sum = 0.0;
-    let mut count = 0usize;
+    // Rows' worth of observed cells (whole rows when nothing is missing).
+    let mut count = 0.0;
     for (ci, chunk) in data.x.chunks(1024).enumerate() {
         let rows: Vec<&[f32]> = chunk.iter().map(|r| r.as_slice()).collect();
-        let t = to_tensor(&rows, n)?;
         let d = days_tensor(&data.days[ci * 1024..ci * 1024 + chunk.len()])?;
-        let out = net.forward(&t, &d)?;
-        let e = mse(&out.recon, &t)?.to_scalar::<f32>()? as f64;
-        sum += e * chunk.len() as f64;
-        count += chunk.len();
+        let (e, cells, _) = batch_mse(net, &rows, n, &d)?;
+        let weight = cells as f64 / n.max(1) as f64;
+        sum += e.to_scalar::<f32>()? as f64 * weight;
+        count += weight;
     }
-    Ok(sum / count.max(1) as f64)
+    Ok(sum / f64::max(count, 1.0))
+}
+
+/// The reconstruction MSE of a batch of rows (standardised, NaN = missing) made on `days`, over
+/// its observed cells, with the number of those cells and F's output (B, C).
+///
+/// A missing channel enters the encoder as 0 — the training mean, as the core fills it on the
+/// first pass of an inversion — and is left out of the error: the model is never asked to
+/// reproduce a value nobody observed (imputing the target would teach it to predict the mean
+/// on such days). A batch without missing channels takes the plain mean over all elements.
+pub fn batch_mse(
+    net: &Net,
+    rows: &[&[f32]],
+    n: usize,
+    days: &Tensor,
+) -> Result<(Tensor, usize, Option<Tensor>)> {
+    let missing = rows
+        .iter()
+        .flat_map(|r| r.iter())
+        .filter(|v| v.is_nan())
+        .count();
+    if missing == 0 {
+        let x = to_tensor(rows, n)?;
+        let out = net.forward(&x, days)?;
+        return Ok((mse(&out.recon, &x)?, rows.len() * n, out.physics));
+    }
+    let filled: Vec<Vec<f32>> = rows
+        .iter()
+        .map(|r| {
+            r.iter()
+                .map(|v| if v.is_nan() { 0.0 } else { *v })
+                .collect()
+        })
+        .collect();
+    let mask: Vec<Vec<f32>> = rows
+        .iter()
+        .map(|r| {
+            r.iter()
+                .map(|v| if v.is_nan() { 0.0 } else { 1.0 })
+                .collect()
+        })
+        .collect();
+    let x = to_tensor(&filled.iter().map(Vec::as_slice).collect::<Vec<_>>(), n)?;
+    let m = to_tensor(&mask.iter().map(Vec::as_slice).collect::<Vec<_>>(), n)?;
+    let out = net.forward(&x, days)?;
+    let cells = rows.len() * n - missing;
+    let sq = out.recon.sub(&x)?.sqr()?.mul(&m)?.sum_all()?;
+    Ok(((sq / cells.max(1) as f64)?, cells, out.physics))
 }
 
 impl Objective for Reconstruction<'_> {
@@ -212,14 +260,12 @@ impl Objective for Reconstruction<'_> {
             .iter()
             .flat_map(|&s| self.train.x[s..s + t].iter().map(|r| r.as_slice()))
             .collect();
-        let x = to_tensor(&rows, n)?;
         let days: Vec<f64> = starts
             .iter()
             .flat_map(|&s| self.train.days[s..s + t].iter().copied())
             .collect();
-        let out = net.forward(&x, &days_tensor(&days)?)?;
-        let mut loss = mse(&out.recon, &x)?;
-        if let (Some(f), true) = (&out.physics, self.lambda > 0.0 && t > 1) {
+        let (mut loss, _, physics) = batch_mse(net, &rows, n, &days_tensor(&days)?)?;
+        if let (Some(f), true) = (&physics, self.lambda > 0.0 && t > 1) {
             let mut s = smoothness(f, starts.len(), t)?;
             if self.smooth_mean {
                 s = (s / (starts.len() * (t - 1) * n) as f64)?;

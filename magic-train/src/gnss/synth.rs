@@ -119,8 +119,8 @@ pub struct Synthetic {
 /// The true source position and depth.
 pub const SOURCE: [f64; 3] = [0.3, 0.2, 7.0];
 
-fn normal(rng: &mut StdRng) -> f64 {
-    // Box–Muller.
+/// A standard normal sample (Box–Muller).
+pub fn normal(rng: &mut StdRng) -> f64 {
     let u1: f64 = rng.random_range(f64::EPSILON..1.0);
     let u2: f64 = rng.random();
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
@@ -249,7 +249,11 @@ pub fn generate(scenario: Scenario, seed: u64) -> Synthetic {
         "effect": effect,
     });
     Synthetic {
-        problem: GnssProblem { network, data },
+        problem: GnssProblem {
+            network,
+            data,
+            source_bounds: super::SourceBounds::paper(),
+        },
         dv,
         truth,
     }
