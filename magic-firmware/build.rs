@@ -1,11 +1,13 @@
 //! Build script of the firmware.
 //!
 //! For the bare-metal target (`target_os = "none"`) it
-//! * puts `memory.x` (`memory-rtm.x` with the feature `rtm`; and an empty `device.x`) on the linker
-//!   search path and links with cortex-m-rt's `link.x`;
-//! * embeds the model file named by the environment variable `MAGIC_MODEL` (copied into `OUT_DIR`
-//!   as `model.magic`, read by `include_bytes!`). A relative path is taken from the workspace root.
-//!   Without `MAGIC_MODEL` the build fails with a message saying how to set it.
+//! * puts the memory layout on the linker search path as `memory.x` — `memory.x` (the measuring
+//!   build), `memory-rtm.x` (feature `rtm`) or `memory-uart.x` (the deployable build, feature
+//!   `uart`) — with an empty `device.x`, and links with cortex-m-rt's `link.x`;
+//! * for the measuring build, embeds the model file named by the environment variable
+//!   `MAGIC_MODEL` (copied into `OUT_DIR` as `model.magic`, read by `include_bytes!`). A relative
+//!   path is taken from the workspace root. Without `MAGIC_MODEL` the build fails with a message
+//!   saying how to set it. The deployable build embeds no model (they are uploaded).
 //!
 //! For the host it does nothing: there the crate is a stub (`fn main() {}`).
 
@@ -25,14 +27,19 @@ fn main() {
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
 
     // The budgeted Mogi firmware links with memory.x; with the `rtm` feature (RTM models and
-    // their tables) with memory-rtm.x.
+    // their tables) with memory-rtm.x; the deployable build (`uart`: code, two model slots and
+    // their header pages) with memory-uart.x.
+    let uart = env::var_os("CARGO_FEATURE_UART").is_some();
     let layout = if env::var_os("CARGO_FEATURE_RTM").is_some() {
         "memory-rtm.x"
+    } else if uart {
+        "memory-uart.x"
     } else {
         "memory.x"
     };
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=memory-rtm.x");
+    println!("cargo:rerun-if-changed=memory-uart.x");
     if let Err(e) = fs::copy(manifest.join(layout), out.join("memory.x")) {
         fail(&format!(
             "cannot copy {layout} into OUT_DIR as memory.x: {e}"
@@ -45,6 +52,9 @@ fn main() {
     }
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rustc-link-arg=-Tlink.x");
+    if uart {
+        return;
+    }
 
     let Some(model) = env::var_os("MAGIC_MODEL") else {
         fail(

@@ -10,7 +10,7 @@ use crate::quant::{
     matvec_i8_packed, pack_i8_pairs, pack_word, packed_set, packed_words, quantize,
     requantize_floor, LeF32, LeI32,
 };
-use crate::Error;
+use crate::{Error, LayerArray, LayerFault, Net};
 use serde::{Deserialize, Serialize};
 
 /// The widest layer input or output the compiled core supports.
@@ -93,156 +93,118 @@ impl Layer<'_> {
     }
 
     /// Checks byte lengths, finiteness of scales and requantisation shifts.
-    pub fn validate(&self) -> Result<(), Error> {
+    pub fn validate(&self) -> Result<(), LayerFault> {
         let (r, c) = (self.rows as usize, self.cols as usize);
         if r == 0 || c == 0 || r > MAX_WIDTH || c > MAX_WIDTH {
-            return Err(Error::InvalidModel(
-                "layer size is zero or wider than the compiled MAX_WIDTH",
-            ));
+            return Err(LayerFault::Size);
         }
-        let len = |what, bytes: usize, n: usize| {
-            if bytes != n {
-                Err(Error::SizeMismatch {
-                    what,
-                    expected: n,
-                    found: bytes,
-                })
-            } else {
-                Ok(())
-            }
-        };
         match self.weights {
             Weights::F32 { w, bias } => {
-                len("f32 layer weight bytes", w.0.len(), 4 * r * c)?;
-                len("f32 layer bias bytes", bias.0.len(), 4 * r)?;
+                bytes(LayerArray::Weights, w.0.len(), 4 * r * c)?;
+                bytes(LayerArray::Bias, bias.0.len(), 4 * r)?;
                 if !w.iter().chain(bias.iter()).all(f32::is_finite) {
-                    return Err(Error::InvalidModel("non-finite f32 weight"));
+                    return Err(LayerFault::NonFiniteWeight);
                 }
+                Ok(())
             }
-            Weights::Int8 {
-                pad,
-                w,
-                bias,
-                w_scale,
-                mult,
-                shift,
-                in_scale,
-                out_scale,
-            } => {
-                if pad.len() > 3 {
-                    return Err(Error::InvalidModel(
-                        "int8 layer padding longer than 3 bytes",
-                    ));
-                }
-                len("int8 layer weight bytes", w.len(), r * c)?;
-                len("int8 layer bias bytes", bias.0.len(), 4 * r)?;
-                // The weight scales serve a layer whose outputs are dequantised, the multipliers
-                // and shifts one whose outputs are requantised for the next int8 layer: each may
-                // be left out (empty) where the chain does not use it (`validate_chain`).
-                let opt = |what, bytes: usize, n: usize| {
-                    if bytes == 0 {
-                        Ok(())
-                    } else {
-                        len(what, bytes, n)
-                    }
-                };
-                opt("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
-                opt("int8 layer multiplier bytes", mult.0.len(), 4 * r)?;
-                opt("int8 layer shift bytes", shift.len(), r)?;
-                let ok_scale = |s: f32| s.is_finite() && s > 0.0;
-                if !ok_scale(in_scale) || !out_scale.is_finite() || out_scale < 0.0 {
-                    return Err(Error::InvalidModel(
-                        "int8 activation scale not positive and finite",
-                    ));
-                }
-                if !w_scale.iter().all(ok_scale) {
-                    return Err(Error::InvalidModel(
-                        "int8 weight scale not positive and finite",
-                    ));
-                }
-                if w.contains(&0x80) {
-                    return Err(Error::InvalidModel(
-                        "int8 weight -128 (symmetric range is ±127)",
-                    ));
-                }
-                for &s in shift {
-                    if !(-30..=30).contains(&(s as i8)) {
-                        return Err(Error::InvalidModel("requantisation shift outside -30..=30"));
-                    }
-                }
-                if (0..r).any(|i| mult.get(i) < 0) {
-                    return Err(Error::InvalidModel("negative requantisation multiplier"));
-                }
+            Weights::Int8 { .. } => self.validate_int8(),
+        }
+    }
+
+    /// The checks of an int8 layer.
+    fn validate_int8(&self) -> Result<(), LayerFault> {
+        let Weights::Int8 {
+            pad,
+            w,
+            bias,
+            w_scale,
+            mult,
+            shift,
+            in_scale,
+            out_scale,
+        } = self.weights
+        else {
+            return Ok(());
+        };
+        let (r, c) = (self.rows as usize, self.cols as usize);
+        if pad.len() > 3 {
+            return Err(LayerFault::Padding);
+        }
+        bytes(LayerArray::Weights, w.len(), r * c)?;
+        bytes(LayerArray::Bias, bias.0.len(), 4 * r)?;
+        // The weight scales serve a layer whose outputs are dequantised, the multipliers and
+        // shifts one whose outputs are requantised for the next int8 layer: each may be left
+        // out (empty) where the chain does not use it (`validate_chain`).
+        let opt = |array, found: usize, n: usize| {
+            if found == 0 {
+                Ok(())
+            } else {
+                bytes(array, found, n)
             }
+        };
+        opt(LayerArray::Scales, w_scale.0.len(), 4 * r)?;
+        opt(LayerArray::Multipliers, mult.0.len(), 4 * r)?;
+        opt(LayerArray::Shifts, shift.len(), r)?;
+        let ok_scale = |s: f32| s.is_finite() && s > 0.0;
+        if !ok_scale(in_scale) || !out_scale.is_finite() || out_scale < 0.0 {
+            return Err(LayerFault::ActivationScale);
+        }
+        if !w_scale.iter().all(ok_scale) {
+            return Err(LayerFault::WeightScale);
+        }
+        if w.contains(&0x80) {
+            return Err(LayerFault::WeightMinus128);
+        }
+        if shift.iter().any(|&s| !(-30..=30).contains(&(s as i8))) {
+            return Err(LayerFault::Shift);
+        }
+        if (0..r).any(|i| mult.get(i) < 0) {
+            return Err(LayerFault::NegativeMultiplier);
         }
         Ok(())
     }
 }
 
-/// Checks that a chain of layers is valid and maps `input` values to `output` values; int8 layers
-/// that feed int8 layers must agree on the activation scale.
-pub fn validate_chain(layers: &[Layer<'_>], input: usize, output: usize) -> Result<(), Error> {
+/// `Ok` when one of a layer's arrays has the bytes required, else [`LayerFault::Bytes`].
+fn bytes(array: LayerArray, found: usize, expected: usize) -> Result<(), LayerFault> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(LayerFault::Bytes {
+            array,
+            expected,
+            found,
+        })
+    }
+}
+
+/// Checks that a chain of layers (the model's `net`) is valid and maps `input` values to `output`
+/// values; int8 layers that feed int8 layers must agree on the activation scale.
+pub fn validate_chain(
+    layers: &[Layer<'_>],
+    input: usize,
+    output: usize,
+    net: Net,
+) -> Result<(), Error> {
     if layers.is_empty() {
-        return Err(Error::InvalidModel("empty network"));
+        return Err(Error::CountOutOfRange {
+            what: match net {
+                Net::Encoder => "encoder layers",
+                Net::Decoder => "decoder layers",
+            },
+            found: 0,
+            min: 1,
+            max: MAX_LAYERS as u16,
+        });
     }
     let mut width = input;
     for (i, l) in layers.iter().enumerate() {
-        l.validate()?;
-        if let Weights::Int8 {
-            w_scale,
-            mult,
-            shift,
-            ..
-        } = l.weights
-        {
-            let r = l.rows as usize;
-            let need = |what, found: usize, expected: usize| {
-                if found == expected {
-                    Ok(())
-                } else {
-                    Err(Error::SizeMismatch {
-                        what,
-                        expected,
-                        found,
-                    })
-                }
-            };
-            if layers.get(i + 1).is_some_and(|n| n.is_int8()) {
-                need("int8 layer multiplier bytes", mult.0.len(), 4 * r)?;
-                need("int8 layer shift bytes", shift.len(), r)?;
-            } else {
-                need("int8 layer scale bytes", w_scale.0.len(), 4 * r)?;
-            }
-        }
-        if l.cols as usize != width {
-            return Err(Error::SizeMismatch {
-                what: "layer inputs",
-                expected: width,
-                found: l.cols as usize,
-            });
-        }
-        if let (
-            Weights::Int8 { out_scale, .. },
-            Some(Layer {
-                weights: Weights::Int8 { in_scale, .. },
-                ..
-            }),
-        ) = (l.weights, layers.get(i + 1))
-        {
-            if out_scale != *in_scale {
-                return Err(Error::InvalidModel(
-                    "int8 layer output scale differs from next input scale",
-                ));
-            }
-        }
-        if l.is_int8()
-            && l.act == Activation::Sigmoid
-            && layers.get(i + 1).is_some_and(|n| n.is_int8())
-        {
-            return Err(Error::InvalidModel(
-                "sigmoid between int8 layers is not supported",
-            ));
-        }
+        let next = layers.get(i + 1);
+        link_fault(l, next, width).map_err(|fault| Error::InvalidLayer {
+            net,
+            layer: i as u8, // i < MAX_LAYERS
+            fault,
+        })?;
         width = l.rows as usize;
     }
     if width != output {
@@ -251,6 +213,50 @@ pub fn validate_chain(layers: &[Layer<'_>], input: usize, output: usize) -> Resu
             expected: output,
             found: width,
         });
+    }
+    Ok(())
+}
+
+/// The checks of layer `l` in its chain: its own ([`Layer::validate`]), its input count
+/// against the previous `width`, and its fit with the `next` layer.
+fn link_fault(l: &Layer<'_>, next: Option<&Layer<'_>>, width: usize) -> Result<(), LayerFault> {
+    l.validate()?;
+    let next_int8 = next.is_some_and(|n| n.is_int8());
+    if let Weights::Int8 {
+        w_scale,
+        mult,
+        shift,
+        ..
+    } = l.weights
+    {
+        let r = l.rows as usize;
+        if next_int8 {
+            bytes(LayerArray::Multipliers, mult.0.len(), 4 * r)?;
+            bytes(LayerArray::Shifts, shift.len(), r)?;
+        } else {
+            bytes(LayerArray::Scales, w_scale.0.len(), 4 * r)?;
+        }
+    }
+    if l.cols as usize != width {
+        return Err(LayerFault::Inputs {
+            expected: width.min(u16::MAX as usize) as u16,
+            found: l.cols,
+        });
+    }
+    if let (
+        Weights::Int8 { out_scale, .. },
+        Some(Layer {
+            weights: Weights::Int8 { in_scale, .. },
+            ..
+        }),
+    ) = (l.weights, next)
+    {
+        if out_scale != *in_scale {
+            return Err(LayerFault::ScaleChain);
+        }
+    }
+    if l.is_int8() && l.act == Activation::Sigmoid && next_int8 {
+        return Err(LayerFault::SigmoidBetweenInt8);
     }
     Ok(())
 }
@@ -414,6 +420,66 @@ pub fn run(
     Ok(())
 }
 
+/// An f32 layer of `cols` inputs: `dst[r] = act(bias[r] + Σ w[r][c] · src[c])`, `w` row-major.
+#[inline(always)]
+fn f32_layer(
+    (w, bias, act): (LeF32<'_>, LeF32<'_>, Activation),
+    cols: usize,
+    src: &[f32],
+    dst: &mut [f32],
+) {
+    for (r, (d, row)) in dst.iter_mut().zip(w.0.chunks_exact(4 * cols)).enumerate() {
+        let mut acc = bias.get(r);
+        for (wb, x) in row.chunks_exact(4).zip(src) {
+            acc += f32::from_le_bytes([wb[0], wb[1], wb[2], wb[3]]) * x;
+        }
+        *d = activate(acc, act);
+    }
+}
+
+/// Whether the byte arrays an int8 layer of `rows × cols` reads are whole (checked once per layer
+/// by [`run_scratch`]; `next_int8` when its outputs are requantised for an int8 layer).
+#[inline(always)]
+fn int8_bytes_whole(
+    weights: &Weights<'_>,
+    rows: usize,
+    cols: usize,
+    next_int8: bool,
+) -> Result<(), Error> {
+    let Weights::Int8 {
+        w,
+        bias,
+        w_scale,
+        mult,
+        shift,
+        ..
+    } = *weights
+    else {
+        return Ok(());
+    };
+    let (what, have, need) = if w.len() < rows * cols {
+        ("int8 layer weight bytes", w.len(), rows * cols)
+    } else if bias.0.len() < 4 * rows {
+        ("int8 layer bias bytes", bias.0.len(), 4 * rows)
+    } else if next_int8 && shift.len() < rows {
+        ("int8 layer shift bytes", shift.len(), rows)
+    } else if next_int8 && mult.0.len() < 4 * rows {
+        ("int8 layer multiplier bytes", mult.0.len(), 4 * rows)
+    } else if !next_int8 && w_scale.0.len() < 4 * rows {
+        ("int8 layer scale bytes", w_scale.0.len(), 4 * rows)
+    } else {
+        ("", 0, 0)
+    };
+    if have < need {
+        return Err(Error::SizeMismatch {
+            what,
+            expected: need,
+            found: have,
+        });
+    }
+    Ok(())
+}
+
 /// [`run`] on the first `n_in` entries of [`Scratch::input`], returning the outputs in place (a
 /// slice of the working memory, valid until its next use).
 pub fn run_scratch<'s>(
@@ -465,19 +531,8 @@ pub fn run_scratch<'s>(
                 }
                 // (Checked slicing: no panic paths; `rows`, `cols` ≤ MAX_WIDTH was checked.)
                 let src = f_src.get(..cols).unwrap_or(&[]);
-                for (r, (d, row)) in f_dst
-                    .get_mut(..rows)
-                    .unwrap_or(&mut [])
-                    .iter_mut()
-                    .zip(w.0.chunks_exact(4 * cols))
-                    .enumerate()
-                {
-                    let mut acc = bias.get(r);
-                    for (wb, x) in row.chunks_exact(4).zip(src) {
-                        acc += f32::from_le_bytes([wb[0], wb[1], wb[2], wb[3]]) * x;
-                    }
-                    *d = activate(acc, l.act);
-                }
+                let dst = f_dst.get_mut(..rows).unwrap_or(&mut []);
+                f32_layer((w, bias, l.act), cols, src, dst);
                 if let Some(Layer {
                     weights: Weights::Int8 { in_scale, .. },
                     ..
@@ -496,27 +551,7 @@ pub fn run_scratch<'s>(
                 in_scale,
                 ..
             } => {
-                // The byte arrays this layer reads must be whole (checked once per layer).
-                let (what, have, need) = if w.len() < rows * cols {
-                    ("int8 layer weight bytes", w.len(), rows * cols)
-                } else if bias.0.len() < 4 * rows {
-                    ("int8 layer bias bytes", bias.0.len(), 4 * rows)
-                } else if next_int8 && shift.len() < rows {
-                    ("int8 layer shift bytes", shift.len(), rows)
-                } else if next_int8 && mult.0.len() < 4 * rows {
-                    ("int8 layer multiplier bytes", mult.0.len(), 4 * rows)
-                } else if !next_int8 && w_scale.0.len() < 4 * rows {
-                    ("int8 layer scale bytes", w_scale.0.len(), 4 * rows)
-                } else {
-                    ("", 0, 0)
-                };
-                if have < need {
-                    return Err(Error::SizeMismatch {
-                        what,
-                        expected: need,
-                        found: have,
-                    });
-                }
+                int8_bytes_whole(&l.weights, rows, cols, next_int8)?;
                 if !in_int8 {
                     quantize_packed(f_src.get(..cols).unwrap_or(&[]), 1.0 / in_scale, q_src);
                 }

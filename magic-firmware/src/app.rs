@@ -1,19 +1,16 @@
 //! The program: decode the embedded model, check the int8 kernel, stream lines through the
 //! inversion, print the cost figures.
 
-use crate::cost::{self, Clock, Stat};
-use crate::io::{Line, Out, Stdin, LINE_MAX};
+use crate::cost::{Clock, Stat};
+use crate::io::{Out, Stdin};
+use crate::line::{Line, LINE_TOO_LONG};
+use crate::selfcheck::self_check;
 use crate::text::{parse_record_bytes, write_result};
+use crate::Linked;
 use core::fmt::Write;
 use magic_core::invert::{invert_probed, Part, Probe, Workspace};
 use magic_core::line::LineError;
-#[cfg(feature = "rtm")]
-use magic_core::model_file::AnyProblem;
-#[cfg(not(feature = "rtm"))]
-use magic_core::model_file::MogiOnly;
 use magic_core::model_file::{Model, MAX_OBS};
-use magic_core::nn::{self, Layer, Weights};
-use magic_core::quant;
 use magic_core::{Flags, Inversion};
 
 /// Word alignment for the embedded model file: the exporter aligns the int8 weights within the
@@ -26,13 +23,6 @@ static ALIGNED: &Aligned<[u8]> =
 
 /// The model file named by `MAGIC_MODEL` at build time (see `build.rs`), word aligned.
 static MODEL: &[u8] = &ALIGNED.0;
-
-/// The forward models this build links: the Mogi model only (the budgeted firmware), or every
-/// problem kind with the feature `rtm`.
-#[cfg(not(feature = "rtm"))]
-type Linked = MogiOnly;
-#[cfg(feature = "rtm")]
-type Linked = AnyProblem;
 
 /// Runs the firmware; `true` for success (exit 0).
 ///
@@ -130,7 +120,7 @@ pub fn run() -> bool {
     }
 
     // The stack high-water mark of the whole run.
-    let mem = cost::memory();
+    let mem = crate::mem::memory();
     let calib = clock.calibrate(10_000);
 
     let _ =
@@ -210,10 +200,6 @@ fn kv(out: &mut Out, key: &str, v: u32) {
     out.end_line();
 }
 
-/// The answer to an input line longer than [`LINE_MAX`] (a constant: no formatting code).
-const LINE_TOO_LONG: &str = "error,line longer than 1024 bytes";
-const _: () = assert!(LINE_MAX == 1024, "update LINE_TOO_LONG");
-
 /// Times the parts of each inversion with SysTick (a [`Probe`] of `invert_probed`): the
 /// instructions of the encoder, the forward model and the correction, summed over the passes of
 /// one inversion. Each reading is exact to ±40 instructions; the means over many lines are far
@@ -242,48 +228,4 @@ impl Probe for Timing<'_> {
             *p += dt;
         }
     }
-}
-
-/// Checks the int8 kernel this build uses (the blocked `SMLAD` matrix-vector product, assembly)
-/// against the portable one (the same lane arithmetic in plain Rust, which the host tests hold to
-/// the plain dot product) on every row of every int8 layer of the model, with deterministic
-/// pseudo-random activations.
-fn self_check(model: &Model<'_>) -> Result<(), &'static str> {
-    let mut seed = 0x2545_F491u32;
-    for layer in model.encoder.iter().chain(model.decoder.iter()) {
-        check_layer(layer, &mut seed)?;
-    }
-    Ok(())
-}
-
-fn check_layer(layer: &Layer<'_>, seed: &mut u32) -> Result<(), &'static str> {
-    let Weights::Int8 { w, .. } = layer.weights else {
-        return Ok(());
-    };
-    let (rows, cols) = (layer.rows as usize, layer.cols as usize);
-    let mut x = [0i8; nn::MAX_WIDTH];
-    let mut xp = [0u32; quant::packed_words(nn::MAX_WIDTH)];
-    let Some(x) = x.get_mut(..cols) else {
-        return Err("layer wider than MAX_WIDTH");
-    };
-    for v in x.iter_mut() {
-        *seed ^= *seed << 13;
-        *seed ^= *seed >> 17;
-        *seed ^= *seed << 5;
-        *v = ((*seed >> 24) as u8 as i8).max(-127);
-    }
-    quant::pack_i8_pairs(x, &mut xp);
-    let xp = xp.get(..quant::packed_words(cols)).unwrap_or(&[]);
-    // Block by block (four rows, `4 · cols` contiguous bytes in the blocked layout; the last
-    // block may be shorter): a block is itself a blocked matrix.
-    for (b, block) in w.chunks(4 * cols.max(1)).enumerate() {
-        let n = rows.saturating_sub(4 * b).min(4);
-        let (mut fast, mut portable) = ([0i32; 4], [0i32; 4]);
-        quant::matvec_i8_packed(block, n, cols, xp, &mut fast);
-        quant::matvec_i8_packed_portable(block, n, cols, xp, &mut portable);
-        if fast != portable {
-            return Err("the DSP int8 kernel differs from the portable one");
-        }
-    }
-    Ok(())
 }

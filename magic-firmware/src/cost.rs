@@ -1,4 +1,4 @@
-//! Cost figures measured on the (emulated) board: executed instructions, stack and flash.
+//! Cost figures measured on the (emulated) board (the measuring build): executed instructions.
 //!
 //! **Instructions.** QEMU is not cycle-accurate, but with `-icount shift=0` its virtual clock
 //! advances exactly 1 ns per executed instruction, and SysTick on `mps2-an386` counts the 25 MHz
@@ -7,12 +7,7 @@
 //! inversions much better. [`Clock::calibrate`] times a loop of known length, so that a run
 //! without `-icount shift=0` (where SysTick follows host time) is detected instead of reported.
 //!
-//! **Stack.** cortex-m-rt's `paint-stack` feature fills the whole stack region (from the end of
-//! the statics, `_stack_end`, to the top of RAM, `_stack_start`) with `0xCCCC_CCCC` before `main`;
-//! [`stack_high_water`] finds the lowest word that is no longer painted.
-//!
-//! **Flash.** From the linker's symbols: everything up to the load address of `.data`, plus
-//! `.data` itself (its initial values live in flash).
+//! Stack, statics and flash are read by [`crate::mem`].
 
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
@@ -126,56 +121,4 @@ pub fn div_round(n: u64, d: u64) -> u64 {
         }
     }
     q
-}
-
-/// Stack and memory layout read from the linker symbols.
-pub struct Memory {
-    /// Bytes of stack ever used (highest extent since reset).
-    pub stack_used: usize,
-    /// Bytes available to the stack (top of RAM down to the end of the statics).
-    pub stack_size: usize,
-    /// Bytes of flash used (code, constants, the model and `.data` initial values).
-    pub flash_used: usize,
-    /// Bytes of RAM taken by statics (`.data` + `.bss`).
-    pub statics: usize,
-}
-
-/// The paint value of cortex-m-rt's `paint-stack` feature.
-const PAINT: u32 = 0xCCCC_CCCC;
-
-extern "C" {
-    static _stack_start: u32;
-    static _stack_end: u32;
-    static __sdata: u32;
-    static __edata: u32;
-    static __sidata: u32;
-    static __ebss: u32;
-}
-
-/// Measures the stack high-water mark and reads the flash and RAM layout.
-#[allow(unsafe_code)]
-pub fn memory() -> Memory {
-    let top = core::ptr::addr_of!(_stack_start) as usize;
-    let bottom = core::ptr::addr_of!(_stack_end) as usize;
-    let mut a = bottom;
-    while a < top {
-        // SAFETY: [bottom, top) is the stack region of RAM defined by the linker script, word
-        // aligned (cortex-m-rt asserts it); reading it volatile has no side effects.
-        let v = unsafe { core::ptr::read_volatile(a as *const u32) };
-        if v != PAINT {
-            break;
-        }
-        a += 4;
-    }
-    let sdata = core::ptr::addr_of!(__sdata) as usize;
-    let edata = core::ptr::addr_of!(__edata) as usize;
-    let sidata = core::ptr::addr_of!(__sidata) as usize;
-    let ebss = core::ptr::addr_of!(__ebss) as usize;
-    Memory {
-        stack_used: top - a,
-        stack_size: top - bottom,
-        // FLASH starts at 0 on mps2-an386 (memory.x).
-        flash_used: sidata + (edata - sdata),
-        statics: ebss - sdata,
-    }
 }

@@ -1,14 +1,12 @@
-//! Semihosting I/O: standard input read in chunks and split into lines, standard output written a
+//! Semihosting I/O (the measuring build): standard input read in chunks and split into lines, standard output written a
 //! line at a time, and the exit call.
 //!
 //! cortex-m-semihosting writes to the host but has no reader, so the two calls needed here (`OPEN`
 //! of `:tt` for reading, `READ`) are made directly with its `syscall!`.
 
+use crate::line::{strip_cr, Line, LINE_MAX};
 use core::fmt;
 use cortex_m_semihosting::{debug, hio};
-
-/// Longest input line accepted (bytes, without the newline): 96 channels of 10 characters fit.
-pub const LINE_MAX: usize = 1024;
 
 /// Ends the program: semihosting exit with success or failure (QEMU exits 0 or 1).
 pub fn exit(ok: bool) -> ! {
@@ -21,14 +19,6 @@ pub fn exit(ok: bool) -> ! {
     loop {
         cortex_m::asm::bkpt();
     }
-}
-
-/// One input line as read.
-pub enum Line<'a> {
-    /// The bytes of the line without its end (`\n`, `\r\n`).
-    Text(&'a [u8]),
-    /// The line was longer than [`LINE_MAX`] (the rest of it was skipped).
-    TooLong,
 }
 
 /// Lines from the host's standard input.
@@ -112,11 +102,7 @@ impl Stdin {
         if self.too_long {
             return Some(Line::TooLong);
         }
-        let mut bytes = self.line.get(..self.n).unwrap_or(&[]);
-        if let [rest @ .., b'\r'] = bytes {
-            bytes = rest;
-        }
-        Some(Line::Text(bytes))
+        Some(Line::Text(strip_cr(self.line.get(..self.n).unwrap_or(&[]))))
     }
 
     fn refill(&mut self) -> bool {

@@ -19,7 +19,7 @@
 //!   prints them. The board's values are f32 (its residual too) and are formatted exactly, in
 //!   integer arithmetic, so the text is identical. Magnitudes of 2³² and more (never produced by
 //!   a valid model) are written in exponent form.
-//! * [`write_u32`] and [`write_hex32`] print integers without `core::fmt` (its formatting
+//! * [`write_u32`], [`write_hex32`] and [`write_hex8`] print integers without `core::fmt` (its formatting
 //!   machinery costs about 2 KB of flash), for the result rows, the cost figures and the errors.
 
 use core::fmt::{self, Write};
@@ -36,7 +36,7 @@ pub fn parse_obs(line: &str, out: &mut [f32]) -> Result<(), LineError> {
     parse_obs_bytes(line.as_bytes(), out)
 }
 
-/// [`parse_obs`] on raw bytes (the board does not check UTF-8: a non-ASCII byte is simply not
+/// `parse_obs` on raw bytes (the board does not check UTF-8: a non-ASCII byte is simply not
 /// part of a number). Whitespace around fields is ASCII whitespace; core's `str::trim` also
 /// removes other Unicode white space (e.g. U+00A0), which here makes the field not a number.
 pub fn parse_obs_bytes(line: &[u8], out: &mut [f32]) -> Result<(), LineError> {
@@ -163,7 +163,7 @@ pub fn parse_f32(s: &str) -> Option<f32> {
     parse_f32_bytes(s.as_bytes())
 }
 
-/// [`parse_f32`] on bytes.
+/// `parse_f32` (host tests) on bytes.
 pub fn parse_f32_bytes(b: &[u8]) -> Option<f32> {
     let (neg, body) = match b.first() {
         Some(b'-') => (true, &b[1..]),
@@ -429,7 +429,7 @@ pub fn write_result<W: Write>(w: &mut W, inv: &Inversion<f32>) -> fmt::Result {
     w.write_char(',')?;
     write_u32(w, u32::from(inv.flags.0))?;
     w.write_char(',')?;
-    write_u32(w, u32::from(inv.used))
+    write_u32(w, inv.used)
 }
 
 /// Writes `v` in decimal, as `{v}` does.
@@ -458,6 +458,12 @@ fn write_digits<W: Write>(w: &mut W, mut v: u32, min: usize) -> fmt::Result {
 /// Writes `v` as `{v:#010x}` does: `0x` and eight lower-case hex digits.
 pub fn write_hex32<W: Write>(w: &mut W, v: u32) -> fmt::Result {
     w.write_str("0x")?;
+    write_hex8(w, v)
+}
+
+/// Writes `v` as `{v:08x}` does: eight lower-case hex digits (a model's id on the board's
+/// answers).
+pub fn write_hex8<W: Write>(w: &mut W, v: u32) -> fmt::Result {
     for k in (0..8).rev() {
         let d = ((v >> (4 * k)) & 0xF) as u8;
         w.write_char(char::from(if d < 10 { b'0' + d } else { b'a' + d - 10 }))?;
@@ -552,6 +558,9 @@ mod tests {
             assert_eq!(a, std::format!("{v}"));
             write_hex32(&mut b, v).unwrap();
             assert_eq!(b, std::format!("{v:#010x}"));
+            let mut h = String::new();
+            write_hex8(&mut h, v).unwrap();
+            assert_eq!(h, std::format!("{v:08x}"));
             if v < 1_000_000 {
                 let mut c = String::new();
                 write_digits(&mut c, v, 6).unwrap();

@@ -33,6 +33,7 @@ pub mod nets;
 pub mod numerics;
 pub mod physics;
 pub mod problem;
+pub mod raster;
 pub mod report;
 pub mod reproduce;
 pub mod rtm;

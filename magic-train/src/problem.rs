@@ -78,8 +78,8 @@ pub trait Problem: Sync {
         Ok(vec![])
     }
 
-    /// The splits fitted families are scored on by default (not the analysed one).
-    fn default_held(&self, fit: SplitName) -> Vec<SplitName>;
+    /// The splits the residual analysis looks at by default.
+    fn default_splits(&self) -> Vec<SplitName>;
     /// The residuals of a model (variant B or C) for the analysis.
     fn residuals(&self, model: &Model<'_>, opts: &AnalysisOptions) -> Result<Self::Residuals>;
     /// The effect families that can be looked for, in report order.

@@ -6,21 +6,81 @@ use magic_train::{MogiPhysics, Net, OwnedModel, Physics};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// The shared data folder: `$MAGIC_DATA`, else `shared/data` beside the workspace. Panics with a
 /// clear message when absent: the reference outputs are part of what the tests check.
 pub fn shared_data() -> PathBuf {
+    data_with(&["oracle"])
+}
+
+/// [`shared_data`], checked to hold every path of `needed` (relative to it, e.g.
+/// `rtm/prospect_d_coefficients.csv`). A missing folder or file is a test failure that says what
+/// to set, never a skipped check.
+pub fn data_with(needed: &[&str]) -> PathBuf {
     let dir = match std::env::var_os("MAGIC_DATA") {
         Some(d) => PathBuf::from(d),
         None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"),
     };
-    assert!(
-        dir.join("oracle").is_dir(),
-        "shared data not found at {} (set MAGIC_DATA to the folder holding gnss/, oracle/, rtm/, s2/)",
-        dir.display()
-    );
+    for rel in needed {
+        assert!(
+            dir.join(rel).exists(),
+            "shared data incomplete: {} not found (set MAGIC_DATA to the folder holding gnss/, \
+             oracle/, rtm/, s2/)",
+            dir.join(rel).display()
+        );
+    }
     dir
+}
+
+/// Whether the firmware tests can run here (Rust target `thumbv7em-none-eabihf`,
+/// `qemu-system-arm`): when the tools are missing, a test failure saying how to install them,
+/// unless `MAGIC_SKIP_QEMU=1` asks explicitly to skip (then a notice, and `false`).
+pub fn toolchain_ready() -> bool {
+    match magic_train::firmware::qemu::ensure_toolchain() {
+        Ok(()) => true,
+        Err(e) if std::env::var("MAGIC_SKIP_QEMU").as_deref() == Ok("1") => {
+            eprintln!("notice: skipping the firmware test (MAGIC_SKIP_QEMU=1): {e}");
+            false
+        }
+        Err(e) => panic!("{e:#}\n(set MAGIC_SKIP_QEMU=1 to skip the QEMU tests)"),
+    }
+}
+
+/// CRC-32/ISO-HDLC, the model file's checksum, written here from its definition (reflected
+/// polynomial 0xEDB88320, initial value and final XOR 0xFFFFFFFF) so that the tests do not hold
+/// the core's CRC to itself.
+pub fn crc32(data: &[u8]) -> u32 {
+    static TABLE: OnceLock<[u32; 256]> = OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        std::array::from_fn(|i| {
+            (0..8).fold(i as u32, |c, _| {
+                if c & 1 != 0 {
+                    (c >> 1) ^ 0xEDB8_8320
+                } else {
+                    c >> 1
+                }
+            })
+        })
+    });
+    !data.iter().fold(0xFFFF_FFFFu32, |c, &b| {
+        t[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8)
+    })
+}
+
+/// Recomputes the CRC of an edited model file (and, with `fix_len`, the header's body length)
+/// so that decoding gets past both to the structural checks behind them.
+pub fn reseal(b: &mut [u8], fix_len: bool) {
+    if b.len() < 14 {
+        return;
+    }
+    if fix_len {
+        let body = (b.len() - 14) as u32;
+        b[6..10].copy_from_slice(&body.to_le_bytes());
+    }
+    let n = b.len();
+    let crc = crc32(&b[..n - 4]);
+    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
 }
 
 /// An untrained (seeded, randomly initialised) Mogi model of `variant` on the Akutan network,
@@ -106,5 +166,14 @@ impl TempDir {
 impl Drop for TempDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// The check value of CRC-32/ISO-HDLC (the CRC catalogue's "123456789").
+    #[test]
+    fn crc32_check_value() {
+        assert_eq!(super::crc32(b"123456789"), 0xCBF4_3926);
     }
 }

@@ -2,14 +2,15 @@
 //! variables inside the model's bounds; decoding never panics; int8 arithmetic stays within ±127;
 //! the Mogi field is finite inside the paper's bounds.
 //!
-//! Tolerance: variables are checked against the bounds up to 1e-6 of the bound range (f32 rounding
-//! of `min + (max − min) · u` at u = 0 or 1), and exactly for the f64 path up to 1e-12.
+//! Tolerance: variables are checked against their bounds up to two roundings of
+//! `min + (max − min) · u` (2 ε of the scalar, relative to the bound); no excursion at all was
+//! measured on 30 000 random observations in f64 or f32.
 
 use magic_core::model_file::{Model, MAGIC, VERSION};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::quant::{quantize, requantize};
 use magic_core::{invert, Flags, Real, Variant, Workspace};
-use magic_tests::random_mogi_model;
+use magic_tests::{crc32, random_mogi_model};
 use magic_train::gnss::synth;
 use proptest::prelude::*;
 use std::sync::OnceLock;
@@ -48,6 +49,13 @@ fn network() -> Vec<Station> {
         .collect()
 }
 
+/// How far a variable may sit outside its bound, relative to the bound's magnitude, in f64 and f32.
+const BOUND_SLACK_F64: f64 = 2.0 * f64::EPSILON;
+const BOUND_SLACK_F32: f64 = 2.0 * f32::EPSILON as f64;
+/// The relative error of an integer requantisation multiplier: m ∈ [2³⁰, 2³¹) is rounded to an
+/// integer, at most 2⁻³¹ relative; twice that.
+const MULTIPLIER_MAX_REL_ERROR: f64 = 1.0 / (1u64 << 30) as f64;
+
 fn check_inversion<R: Real>(m: &Model<'_>, obs: &[f32], tol: f64) -> Result<(), TestCaseError> {
     let inv = invert::<R>(m, obs, &mut Workspace::default())
         .map_err(|e| TestCaseError::fail(format!("{e}")))?;
@@ -61,7 +69,7 @@ fn check_inversion<R: Real>(m: &Model<'_>, obs: &[f32], tol: f64) -> Result<(), 
     for j in 0..inv.n_params {
         let p = inv.params[j].value();
         let [lo, hi] = m.bounds[j];
-        let slack = tol * (hi - lo) as f64;
+        let slack = tol * lo.abs().max(hi.abs()) as f64;
         prop_assert!(p.is_finite(), "param {} = {}", j, p);
         prop_assert!(
             p >= lo as f64 - slack && p <= hi as f64 + slack,
@@ -87,8 +95,8 @@ proptest! {
         which in 0usize..3,
     ) {
         let m = &models()[which];
-        check_inversion::<f64>(m, &obs, 1e-12)?;
-        check_inversion::<f32>(m, &obs, 1e-6)?;
+        check_inversion::<f64>(m, &obs, BOUND_SLACK_F64)?;
+        check_inversion::<f32>(m, &obs, BOUND_SLACK_F32)?;
     }
 
     #[test]
@@ -101,7 +109,7 @@ proptest! {
         let obs: Vec<f32> = obs.iter().zip(&mask).map(|(x, gone)| if *gone { f32::NAN } else { *x }).collect();
         let observed = obs.iter().filter(|x| !x.is_nan()).count();
         if observed >= 4 {
-            check_inversion::<f64>(m, &obs, 1e-12)?;
+            check_inversion::<f64>(m, &obs, BOUND_SLACK_F64)?;
         } else {
             prop_assert!(invert::<f64>(m, &obs, &mut Workspace::default()).is_err());
         }
@@ -141,8 +149,10 @@ proptest! {
         let (m, s) = magic_core::quant::quantize_multiplier(mult).unwrap();
         let want = (acc as f64 * mult).clamp(-127.0, 127.0);
         let got = requantize(acc, m, s) as f64;
-        // Rounding (0.5) plus the multiplier's relative error (2^-30) on |acc · mult|.
-        prop_assert!((got - want).abs() <= 0.5 + 1e-9 * (acc as f64 * mult).abs() + 1e-9, "{} vs {}", got, want);
+        // Rounding to an integer (0.5) plus the multiplier's relative error on |acc · mult| (analytic
+        // bounds, not measured ones), plus the f64 product's own rounding.
+        let bound = 0.5 + MULTIPLIER_MAX_REL_ERROR * (acc as f64 * mult).abs() + 1e-9;
+        prop_assert!((got - want).abs() <= bound, "{} vs {}", got, want);
     }
 
     #[test]
@@ -188,21 +198,6 @@ proptest! {
         let mut u = vec![0f64; 36];
         prop_assert!(mogi::field(&network(), &[0.0, 0.0, d, 1.0], &mut u).is_err());
     }
-}
-
-fn crc32(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &byte in data {
-        c ^= byte as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                (c >> 1) ^ 0xEDB8_8320
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
 }
 
 /// Deterministic filler bytes for generated layers.
@@ -342,7 +337,7 @@ proptest! {
         let input: Vec<f32> = (0..n_in).map(|i| i as f32 * 0.37 - 20.0).collect();
         let mut output = vec![0f32; if chain { width as usize } else { n_out }];
         let _ = magic_core::nn::run(&layers, &input, &mut output, &mut magic_core::nn::Scratch::default());
-        let _ = magic_core::nn::validate_chain(&layers, n_in, n_out);
+        let _ = magic_core::nn::validate_chain(&layers, n_in, n_out, magic_core::Net::Encoder);
     }
 }
 

@@ -15,15 +15,16 @@
 //! `MAGIC_FUZZ_ONLY=<case>` reruns one case. Case `i` is generated from (seed, target, i) alone, so
 //! a failure report (seed, case and input in hex) reproduces exactly. A panic is caught with
 //! `catch_unwind` and reported with its input before the test fails; a case that runs longer than
-//! `MAGIC_FUZZ_CASE_SECS` (default 10 s) is reported as a hang, and the whole run must finish
-//! within a budget that grows with the number of cases.
+//! `MAGIC_FUZZ_CASE_SECS` (default 10 s, 300 times the slowest case measured, 32 ms) is reported
+//! as a hang: a watchdog against non-termination, not a speed requirement (the run's rate and
+//! slowest case are printed).
 //!
 //! The long run: `MAGIC_FUZZ_CASES=1000000 cargo test --release -p magic-tests --test fuzz -- --nocapture`.
 
 use magic_core::line::parse_obs;
 use magic_core::model_file::{Model, MAGIC, VERSION};
 use magic_core::{invert, Variant, Workspace};
-use magic_tests::random_mogi_model;
+use magic_tests::{random_mogi_model, reseal};
 use magic_train::gnss::synth;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -149,8 +150,6 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
         .ok()
         .map(|v| v.parse::<u64>().expect("MAGIC_FUZZ_ONLY: a case number"));
     let case_limit = Duration::from_secs(env_u64("MAGIC_FUZZ_CASE_SECS", 10));
-    // Generous: 60 s plus 2 ms per case (the release build runs far faster than that).
-    let budget = Duration::from_secs(60) + Duration::from_millis(2 * cases);
     let progress = Arc::new(AtomicU64::new(0));
     let (tx, rx) = mpsc::channel::<Result<(u64, f64), (u64, Vec<u8>)>>();
     let (g, c, p) = (gen.clone(), check.clone(), progress.clone());
@@ -188,10 +187,6 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
                     slowest * 1e3,
                     seed()
                 );
-                assert!(
-                    start.elapsed() < budget,
-                    "fuzz {name}: run took {secs:.1} s, over the {budget:?} budget"
-                );
                 return;
             }
             Ok(Err((i, input))) => {
@@ -217,10 +212,6 @@ fn run(name: &'static str, target: u64, cases: u64, gen: Gen, check: Check) {
                         hex(&input)
                     );
                 }
-                assert!(
-                    start.elapsed() < budget,
-                    "fuzz {name}: not finished within {budget:?} (at case {i})"
-                );
             }
             Err(mpsc::RecvTimeoutError::Disconnected) => {
                 panic!("fuzz {name}: worker ended without a result")
@@ -270,57 +261,12 @@ fn models() -> &'static Models {
     })
 }
 
-fn crc32(data: &[u8]) -> u32 {
-    static TABLE: OnceLock<[u32; 256]> = OnceLock::new();
-    let t = TABLE.get_or_init(|| {
-        std::array::from_fn(|i| {
-            let mut c = i as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    (c >> 1) ^ 0xEDB8_8320
-                } else {
-                    c >> 1
-                };
-            }
-            c
-        })
-    });
-    !data.iter().fold(0xFFFF_FFFFu32, |c, &b| {
-        t[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8)
-    })
-}
-
-/// Rewrites the header's body length and the CRC so that decoding gets past both.
-fn reseal(b: &mut [u8], fix_len: bool) {
-    if b.len() < 14 {
-        return;
-    }
-    if fix_len {
-        let body = (b.len() - 14) as u32;
-        b[6..10].copy_from_slice(&body.to_le_bytes());
-    }
-    let n = b.len();
-    let crc = crc32(&b[..n - 4]);
-    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
-}
-
+/// A mutated model file: one case in 16 random bytes (half behind a valid header), otherwise
+/// one of the valid files with 1 to 6 edits, most resealed.
 fn mutate_model(r: &mut Rng) -> Vec<u8> {
     let m = models();
     if r.chance(1, 16) {
-        // Random bytes, half of them behind a valid header.
-        let max = if r.chance(1, 2) { 64 } else { 4096 };
-        let n = r.below(max);
-        let mut b: Vec<u8> = (0..n).map(|_| r.byte()).collect();
-        if r.chance(1, 2) {
-            let mut h = MAGIC.to_vec();
-            h.extend(VERSION.to_le_bytes());
-            h.extend((n as u32).to_le_bytes());
-            h.extend(b);
-            b = h;
-            b.extend([0; 4]);
-            reseal(&mut b, false);
-        }
-        return b;
+        return random_file(r);
     }
     // Three cases in four mutate the int8 C model, the rest any of the four.
     let pool = if r.chance(3, 4) { 1 } else { m.files.len() };
@@ -328,102 +274,127 @@ fn mutate_model(r: &mut Rng) -> Vec<u8> {
     let mut b = m.files[src].clone();
     let mut structural = false;
     for _ in 0..1 + r.below(6) {
-        let n = b.len();
-        match r.below(10) {
-            0 | 1 => {
-                let i = r.below(n.max(1));
-                if let Some(x) = b.get_mut(i) {
-                    *x ^= 1 << r.below(8);
-                }
-            }
-            2 | 3 => {
-                const SET: [u8; 8] = [0, 1, 0x7F, 0x80, 0xFF, 0xFE, 0x40, 0x3F];
-                let i = r.below(n.max(1));
-                let v = if r.chance(1, 2) {
-                    SET[r.below(8)]
-                } else {
-                    r.byte()
-                };
-                if let Some(x) = b.get_mut(i) {
-                    *x = v;
-                }
-            }
-            4 => {
-                b.truncate(r.below(n + 1));
-                structural = true;
-            }
-            5 => {
-                // Splice a chunk of another (or the same) model file over or into this one.
-                let other = &m.files[r.below(m.files.len())];
-                let a = r.below(other.len());
-                let len = r.below(64.min(other.len() - a) + 1);
-                let chunk = other[a..a + len].to_vec();
-                let at = r.below(n + 1);
-                if r.chance(1, 2) {
-                    b.splice(at..at, chunk);
-                    structural = true;
-                } else {
-                    for (k, c) in chunk.into_iter().enumerate() {
-                        if let Some(x) = b.get_mut(at + k) {
-                            *x = c;
-                        }
-                    }
-                }
-            }
-            6 => {
-                let at = r.below(n + 1);
-                let ins: Vec<u8> = (0..1 + r.below(16)).map(|_| r.byte()).collect();
-                b.splice(at..at, ins);
-                structural = true;
-            }
-            7 => {
-                let at = r.below(n + 1);
-                let end = (at + 1 + r.below(16)).min(n);
-                b.drain(at..end);
-                structural = true;
-            }
-            8 => {
-                // A little-endian word (a length, a count, a float) set to something extreme.
-                const WORDS: [u32; 8] = [
-                    0,
-                    1,
-                    0xFFFF_FFFF,
-                    0x7FFF_FFFF,
-                    0x8000_0000,
-                    0x7F80_0000,
-                    0x7FC0_0000,
-                    0x0000_0001,
-                ];
-                let w = if r.chance(1, 2) {
-                    WORDS[r.below(8)]
-                } else {
-                    r.next() as u32
-                };
-                let at = r.below(n.max(4) - 3);
-                for (k, x) in w.to_le_bytes().into_iter().enumerate() {
-                    if let Some(y) = b.get_mut(at + k) {
-                        *y = x;
-                    }
-                }
-            }
-            _ => {
-                // The header: version or body length.
-                if n >= 10 {
-                    let i = 4 + r.below(6);
-                    b[i] = if r.chance(1, 2) {
-                        r.byte()
-                    } else {
-                        b[i].wrapping_add(1)
-                    };
-                }
-            }
-        }
+        structural |= edit(r, &mut b, &m.files);
     }
     // Most cases get a valid CRC (and usually a consistent length) so decoding goes deeper.
     if r.chance(7, 8) {
         reseal(&mut b, structural && r.chance(7, 8));
     }
     b
+}
+
+/// Random bytes, half of them behind a valid header.
+fn random_file(r: &mut Rng) -> Vec<u8> {
+    let max = if r.chance(1, 2) { 64 } else { 4096 };
+    let n = r.below(max);
+    let mut b: Vec<u8> = (0..n).map(|_| r.byte()).collect();
+    if r.chance(1, 2) {
+        let mut h = MAGIC.to_vec();
+        h.extend(VERSION.to_le_bytes());
+        h.extend((n as u32).to_le_bytes());
+        h.extend(b);
+        b = h;
+        b.extend([0; 4]);
+        reseal(&mut b, false);
+    }
+    b
+}
+
+/// One random edit of `b` (bit flip, byte set, truncation, splice from `files`, insertion,
+/// deletion, extreme word, header byte); whether it changed the length.
+fn edit(r: &mut Rng, b: &mut Vec<u8>, files: &[Vec<u8>]) -> bool {
+    let mut structural = false;
+    let n = b.len();
+    match r.below(10) {
+        0 | 1 => {
+            let i = r.below(n.max(1));
+            if let Some(x) = b.get_mut(i) {
+                *x ^= 1 << r.below(8);
+            }
+        }
+        2 | 3 => {
+            const SET: [u8; 8] = [0, 1, 0x7F, 0x80, 0xFF, 0xFE, 0x40, 0x3F];
+            let i = r.below(n.max(1));
+            let v = if r.chance(1, 2) {
+                SET[r.below(8)]
+            } else {
+                r.byte()
+            };
+            if let Some(x) = b.get_mut(i) {
+                *x = v;
+            }
+        }
+        4 => {
+            b.truncate(r.below(n + 1));
+            structural = true;
+        }
+        5 => {
+            // Splice a chunk of another (or the same) model file over or into this one.
+            let other = &files[r.below(files.len())];
+            let a = r.below(other.len());
+            let len = r.below(64.min(other.len() - a) + 1);
+            let chunk = other[a..a + len].to_vec();
+            let at = r.below(n + 1);
+            if r.chance(1, 2) {
+                b.splice(at..at, chunk);
+                structural = true;
+            } else {
+                for (k, c) in chunk.into_iter().enumerate() {
+                    if let Some(x) = b.get_mut(at + k) {
+                        *x = c;
+                    }
+                }
+            }
+        }
+        6 => {
+            let at = r.below(n + 1);
+            let ins: Vec<u8> = (0..1 + r.below(16)).map(|_| r.byte()).collect();
+            b.splice(at..at, ins);
+            structural = true;
+        }
+        7 => {
+            let at = r.below(n + 1);
+            let end = (at + 1 + r.below(16)).min(n);
+            b.drain(at..end);
+            structural = true;
+        }
+        8 => {
+            // A little-endian word (a length, a count, a float) set to something extreme.
+            const WORDS: [u32; 8] = [
+                0,
+                1,
+                0xFFFF_FFFF,
+                0x7FFF_FFFF,
+                0x8000_0000,
+                0x7F80_0000,
+                0x7FC0_0000,
+                0x0000_0001,
+            ];
+            let w = if r.chance(1, 2) {
+                WORDS[r.below(8)]
+            } else {
+                r.next() as u32
+            };
+            let at = r.below(n.max(4) - 3);
+            for (k, x) in w.to_le_bytes().into_iter().enumerate() {
+                if let Some(y) = b.get_mut(at + k) {
+                    *y = x;
+                }
+            }
+        }
+        _ => {
+            // The header: version or body length.
+            if n >= 10 {
+                let i = 4 + r.below(6);
+                b[i] = if r.chance(1, 2) {
+                    r.byte()
+                } else {
+                    b[i].wrapping_add(1)
+                };
+            }
+        }
+    }
+    structural
 }
 
 /// A few observation vectors for a model, derived from the input bytes.

@@ -3,7 +3,7 @@
 
 use magic_core::model_file::{Problem, VERSION};
 use magic_core::{invert, Error, Model, Variant, Workspace};
-use magic_tests::random_mogi_model;
+use magic_tests::{random_mogi_model, reseal};
 use magic_train::gnss::synth;
 
 fn int8_bytes() -> Vec<u8> {
@@ -15,29 +15,6 @@ fn int8_bytes() -> Vec<u8> {
         .x[..200]
         .to_vec();
     m.quantize_int8(&calib).unwrap().encode().unwrap()
-}
-
-/// Recomputes the CRC after an edit so that the structural checks behind it are reached.
-fn reseal(b: &mut [u8]) {
-    let crc = crc32(&b[..b.len() - 4]);
-    let n = b.len();
-    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
-}
-
-fn crc32(data: &[u8]) -> u32 {
-    // CRC-32/ISO-HDLC, bitwise (test-only reference).
-    let mut c = 0xFFFF_FFFFu32;
-    for &byte in data {
-        c ^= byte as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                (c >> 1) ^ 0xEDB8_8320
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
 }
 
 #[test]
@@ -95,7 +72,7 @@ fn wrong_version_problem_and_sizes() {
     let b = int8_bytes();
     let mut v = b.clone();
     v[4..6].copy_from_slice(&(VERSION + 1).to_le_bytes());
-    reseal(&mut v);
+    reseal(&mut v, false);
     assert_eq!(
         Model::decode(&v).unwrap_err(),
         Error::UnsupportedVersion {
@@ -133,7 +110,7 @@ fn wrong_version_problem_and_sizes() {
     for (i, x) in g[10..].iter_mut().enumerate() {
         *x = (i * 7919 % 251) as u8;
     }
-    reseal(&mut g);
+    reseal(&mut g, false);
     assert!(Model::decode(&g).is_err());
 }
 

@@ -2,17 +2,17 @@
 //! Jacobian held to central differences, and physical invariants checked with proptest.
 //!
 //! Data are found through `MAGIC_DATA` or `../shared/data` next to the workspace; without them the
-//! tests print a notice and pass.
+//! tests fail, saying what to set.
 
 // Index loops over several parallel arrays (bands × variables) read more plainly here.
 #![allow(clippy::needless_range_loop)]
 
 use magic_core::rtm::inform::Geometry;
-use magic_core::rtm::prospect::{leaf_optics, Coefficients, Leaf};
+use magic_core::rtm::prosail::{self, Prosail, FACTOR_NAMES, N_FACTORS};
+use magic_core::rtm::prospect::Coefficients;
 use magic_core::rtm::sail::{
     extinction, layer, medium, sail, CampbellBins, HotspotRule, Lidf, SunView,
 };
-use magic_core::rtm::sensor::Resampling;
 use magic_core::rtm::{
     inputs_from_learned, Fixed, Inform, Tables, LEARNED_BOUNDS, N_BANDS, N_INPUTS, N_LEARNED,
 };
@@ -21,24 +21,46 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+// Tolerances: the measured error (printed by `-- --nocapture`) times 10, rounded up, unless
+// stated otherwise. The oracle inputs are fixed, so the measurements are deterministic; the
+// proptest bounds were measured on 2 000 random points (600 for the Jacobian), beyond the cases
+// the tests draw.
+
+/// INFORM f64 against the oracle (reflectance): measured 3.0e-14 (10k) and 5.3e-14 (geometry 2k).
+const INFORM_F64_MAX_ERROR: f64 = 6e-13;
+/// INFORM f32 against the oracle: measured 2.7e-7 and 2.9e-7 (f32 rounding, ε = 1.2e-7).
+const INFORM_F32_MAX_ERROR: f64 = 3e-6;
+/// The stepwise intermediate spectra (leaf reflectance, leaf transmittance, understory, crown
+/// layer, the two transmittances, forest): measured 1.0e-15, 1.6e-12, 8.5e-14, 6.2e-14, 1.1e-13,
+/// 1.2e-13, 6.6e-14.
+const STEPWISE_MAX_ERROR: [f64; 7] = [1e-14, 2e-11, 9e-13, 7e-13, 2e-12, 2e-12, 7e-13];
+/// The stepwise band values: measured 7.4e-16.
+const STEPWISE_BANDS_MAX_ERROR: f64 = 8e-15;
+/// The 4SAIL scalars of each call, relative to 1 + |value|: measured 2.8e-16.
+const SAIL_SCALARS_MAX_REL_ERROR: f64 = 3e-15;
+/// INFORM's crown-geometry scalars and angles: measured 2.2e-16.
+const INFORM_SCALARS_MAX_ERROR: f64 = 2.5e-15;
+/// Physical 4SAIL (rsot, rdot, rsdt, rddt in bands) against the independent prosail package:
+/// measured 2.2e-14, 4.4e-14, 5.5e-14, 9.1e-14.
+const PROSAIL_MAX_ERROR: f64 = 1e-12;
+/// The dual number's value against the plain f64 forward model: measured 2.2e-16 (one ulp).
+const DUAL_VALUE_MAX_ERROR: f64 = 2.5e-15;
+/// The exact Jacobian against central differences (relative, see `jacobian_error`): measured
+/// 1.2e-7 / 1.7e-7 (reference / physical geometry) at the centre and corners, 2.4e-7 on 600
+/// random points of the box: the central differences' own error.
+const JACOBIAN_MAX_REL_ERROR: f64 = 2.5e-6;
+/// f32 INFORM against f64 on varied inputs: measured 3.3e-7.
+const F32_VS_F64_MAX_ERROR: f64 = 3.5e-6;
+/// A stand of crown cover fc = 40 against the closed crown layer: measured 0 (exact); a few ulps.
+const CLOSED_CANOPY_MAX_GAP: f64 = 4.0 * f64::EPSILON;
+/// A stand of crown cover fc = 1e-7 against the understory: measured 1.6e-7 (the gap shrinks with
+/// fc); 6× that.
+const SPARSE_STAND_MAX_GAP: f64 = 1e-6;
+/// 4SAIL with sun and view exchanged (rsot; rdot against rsdt; rddt): measured 3.3e-16, 0, 0.
+const RECIPROCITY_MAX_ERROR: f64 = 4e-15;
+
 // ---------------------------------------------------------------------------------------------
 // Data loading (std only)
-
-fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("MAGIC_DATA") {
-        Some(d) => PathBuf::from(d),
-        None => PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")),
-    };
-    if dir.join("rtm/prospect_d_coefficients.csv").exists() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "notice: RTM data not found at {} (set MAGIC_DATA); skipping",
-            dir.display()
-        );
-        None
-    }
-}
 
 /// A CSV file: header and rows of raw fields.
 struct Csv {
@@ -163,14 +185,14 @@ struct Data {
     tables: OwnedTables,
 }
 
-fn data() -> Option<&'static Data> {
-    static DATA: OnceLock<Option<Data>> = OnceLock::new();
+/// The tables and the oracle outputs (a test failure, saying what to set, without them).
+fn data() -> &'static Data {
+    static DATA: OnceLock<Data> = OnceLock::new();
     DATA.get_or_init(|| {
-        let dir = data_dir()?;
+        let dir = magic_tests::data_with(&["rtm/prospect_d_coefficients.csv", "oracle"]);
         let tables = OwnedTables::load(&dir);
-        Some(Data { dir, tables })
+        Data { dir, tables }
     })
-    .as_ref()
 }
 
 const INPUT_COLS: [&str; N_INPUTS] = [
@@ -198,7 +220,7 @@ fn to_f32(x: &[f64; N_INPUTS]) -> [f32; N_INPUTS] {
 // Reference geometry against the INFORM oracles
 
 fn check_bands_file(file: &str) {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let csv = Csv::read(d.dir.join("oracle").join(file));
     let (mut e64, mut e32) = (0.0f64, 0.0f64);
@@ -225,8 +247,14 @@ fn check_bands_file(file: &str) {
         "{file}: {} rows, reference geometry: max |error| f64 {e64:.3e} (row {w64}), f32 {e32:.3e} (row {w32})",
         csv.rows.len()
     );
-    assert!(e64 <= 1e-9, "{file}: f64 error {e64:e} at row {w64}");
-    assert!(e32 <= 2e-5, "{file}: f32 error {e32:e} at row {w32}");
+    assert!(
+        e64 <= INFORM_F64_MAX_ERROR,
+        "{file}: f64 error {e64:e} at row {w64}"
+    );
+    assert!(
+        e32 <= INFORM_F32_MAX_ERROR,
+        "{file}: f32 error {e32:e} at row {w32}"
+    );
 }
 
 #[test]
@@ -241,7 +269,7 @@ fn reference_matches_inform_geometry_2k() {
 
 #[test]
 fn reference_matches_stepwise() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let src = Csv::read(d.dir.join("oracle/rtm_inform_s2_10k.csv"));
     let pro = Csv::read(d.dir.join("oracle/rtm_stepwise_prospect.csv"));
@@ -305,19 +333,24 @@ fn reference_matches_stepwise() {
     }
     eprintln!("stepwise s2 bands      max |error| {e_s2:.3e}");
     for j in 0..7 {
-        assert!(err[j] <= 1e-9, "{}: {:e}", names[j], err[j]);
+        assert!(
+            err[j] <= STEPWISE_MAX_ERROR[j],
+            "{}: {:e}",
+            names[j],
+            err[j]
+        );
     }
-    assert!(e_s2 <= 1e-9);
+    assert!(e_s2 <= STEPWISE_BANDS_MAX_ERROR, "{e_s2:e}");
 }
 
 #[test]
 fn reference_matches_stepwise_scalars() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let src = Csv::read(d.dir.join("oracle/rtm_inform_s2_10k.csv"));
     let sc = Csv::read(d.dir.join("oracle/rtm_stepwise_sail_scalars.csv"));
     let isc = Csv::read(d.dir.join("oracle/rtm_stepwise_inform_scalars.csv"));
-    let mut err = 0.0f64;
+    let (mut err, mut rel) = (0.0f64, 0.0f64);
     for r in 0..sc.rows.len() {
         let sample = sc.f(r, "sample_id") as usize;
         let scene = model
@@ -348,11 +381,11 @@ fn reference_matches_stepwise_scalars() {
             let want = sc.f(r, name);
             let d = (got - want).abs();
             assert!(
-                d <= 1e-9 * (1.0 + want.abs()),
+                d <= SAIL_SCALARS_MAX_REL_ERROR * (1.0 + want.abs()),
                 "sample {sample} {}: {name} {got} vs {want}",
                 sc.s(r, "call")
             );
-            err = err.max(d);
+            rel = rel.max(d / (1.0 + want.abs()));
         }
     }
     for r in 0..isc.rows.len() {
@@ -379,11 +412,16 @@ fn reference_matches_stepwise_scalars() {
         for (name, got) in pairs {
             let want = isc.f(r, name);
             let d = (got - want).abs();
-            assert!(d <= 1e-12, "sample {sample}: {name} {got} vs {want}");
+            assert!(
+                d <= INFORM_SCALARS_MAX_ERROR,
+                "sample {sample}: {name} {got} vs {want}"
+            );
             err = err.max(d);
         }
     }
-    eprintln!("stepwise scalars (4SAIL calls, crown geometry) max |error| {err:.3e}");
+    eprintln!(
+        "stepwise scalars: 4SAIL calls max relative error {rel:.3e}, crown geometry max |error| {err:.3e}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -391,62 +429,39 @@ fn reference_matches_stepwise_scalars() {
 
 #[test]
 fn physical_sail_matches_prosail() {
-    let Some(d) = data() else { return };
-    let t = d.tables.tables();
-    let coef = t.prospect;
-    let n_wl = coef.len();
-    let sensor = Resampling::new(t.resampling, n_wl, N_BANDS).unwrap();
+    let d = data();
+    let model = Prosail::new(&d.tables.tables()).unwrap();
     let csv = Csv::read(d.dir.join("oracle/sail_4sail_s2_1k.csv"));
-    let factors = ["rsot", "rdot", "rsdt", "rddt"];
     // The file's `rdot_*` and `rddt_*` columns are swapped: prosail's `run_sail(...,
     // factor="ALL")` returns [rsot, rddt, rsdt, rdot] and the columns were labelled in the order
     // rsot, rdot, rsdt, rddt. Our rdot is the reference implementation's (held to the INFORM
     // oracle above), and the swapped columns agree with ours to round-off.
     let columns = ["rsot", "rddt", "rsdt", "rdot"];
-    let mut err = [0.0f64; 4];
-    let mut spectra = vec![vec![0.0f64; n_wl]; 4];
+    let mut err = [0.0f64; N_FACTORS];
     for r in 0..csv.rows.len() {
-        let f = |n: &str| csv.f(r, n);
-        let leaf = Leaf {
-            n: f("N"),
-            cab: f("cab"),
-            car: f("car"),
-            anth: f("anth"),
-            cbrown: f("cbrown"),
-            cw: f("cw"),
-            cm: f("cm"),
-        };
-        let lidf = Lidf::campbell(f("ala"), CampbellBins::Uniform18).unwrap();
-        let g = SunView::from_degrees(f("tts"), f("tto"), f("psi"));
-        let e = extinction(&g, &lidf);
-        let l = layer(&e, f("lai"), f("hspot"), HotspotRule::Physical);
-        let psoil = f("psoil");
-        for i in 0..n_wl {
-            let optics = leaf_optics(&coef.row(i).unwrap(), &leaf);
-            let soil = psoil * t.soil_dry[i] + (1.0 - psoil) * t.soil_wet[i];
-            let o = sail(&e, &l, &medium(e.bf, optics), soil);
-            spectra[0][i] = o.rsot;
-            spectra[1][i] = o.rdot;
-            spectra[2][i] = o.rsdt;
-            spectra[3][i] = o.rddt;
-        }
-        for k in 0..factors.len() {
-            let mut bands = [0.0; N_BANDS];
-            sensor.integrate_slice(&spectra[k], &mut bands).unwrap();
+        let x: [f64; prosail::N_INPUTS] =
+            core::array::from_fn(|i| csv.f(r, prosail::INPUT_NAMES[i]));
+        let y = model.forward(&x).unwrap();
+        for k in 0..N_FACTORS {
             for (b, band) in magic_core::rtm::S2_BANDS.iter().enumerate() {
                 let want = csv.f(r, &format!("{}_{band}", columns[k]));
-                err[k] = err[k].max((bands[b] - want).abs());
+                err[k] = err[k].max((y[k][b] - want).abs());
             }
         }
     }
-    for k in 0..4 {
+    for k in 0..N_FACTORS {
         eprintln!(
             "sail_4sail_s2_1k.csv physical 4SAIL {} (file column {}): max |error| {:.3e}",
-            factors[k], columns[k], err[k]
+            FACTOR_NAMES[k], columns[k], err[k]
         );
     }
-    for k in 0..4 {
-        assert!(err[k] <= 1e-6, "{}: {:e}", factors[k], err[k]);
+    for k in 0..N_FACTORS {
+        assert!(
+            err[k] <= PROSAIL_MAX_ERROR,
+            "{}: {:e}",
+            FACTOR_NAMES[k],
+            err[k]
+        );
     }
 }
 
@@ -463,7 +478,7 @@ fn jacobian_error(model: &Inform<'_>, z: &[f64; N_LEARNED], geometry: Geometry) 
     let y0 = model.forward_learned(z, &fixed, geometry).unwrap();
     for b in 0..N_BANDS {
         assert!(
-            (y[b] - y0[b]).abs() <= 1e-14,
+            (y[b] - y0[b]).abs() <= DUAL_VALUE_MAX_ERROR,
             "dual value differs from f64 value"
         );
     }
@@ -502,7 +517,7 @@ fn box_point(u: &[f64; N_LEARNED]) -> [f64; N_LEARNED] {
 
 #[test]
 fn jacobian_matches_central_differences_at_corners_and_centre() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let mut worst = [0.0f64; 2];
     let mut points = vec![[0.5; N_LEARNED]];
@@ -527,7 +542,10 @@ fn jacobian_matches_central_differences_at_corners_and_centre() {
         "Jacobian vs central differences, centre + 128 corners: max relative error reference {:.3e}, physical {:.3e}",
         worst[0], worst[1]
     );
-    assert!(worst[0] <= 1e-5 && worst[1] <= 1e-5, "{worst:?}");
+    assert!(
+        worst[0] <= JACOBIAN_MAX_REL_ERROR && worst[1] <= JACOBIAN_MAX_REL_ERROR,
+        "{worst:?}"
+    );
 }
 
 proptest::proptest! {
@@ -538,11 +556,11 @@ proptest::proptest! {
         u in proptest::array::uniform7(0.0f64..=1.0),
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
         let err = jacobian_error(&model, &box_point(&u), geometry);
-        proptest::prop_assert!(err <= 1e-5, "relative error {err:e} at {u:?}");
+        proptest::prop_assert!(err <= JACOBIAN_MAX_REL_ERROR, "relative error {err:e} at {u:?}");
     }
 
     #[test]
@@ -552,7 +570,7 @@ proptest::proptest! {
         high in proptest::bool::ANY,
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let mut u = u;
         u[face] = if high { 1.0 } else { 0.0 };
@@ -611,7 +629,7 @@ proptest::proptest! {
         v in proptest::array::uniform6(0.0f64..1.0),
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
         let x = varied_inputs(&u, &v);
@@ -621,7 +639,7 @@ proptest::proptest! {
         }
         let y32 = model.forward(&x.map(|v| v as f32), geometry).unwrap();
         for b in 0..N_BANDS {
-            proptest::prop_assert!((y32[b] as f64 - y[b]).abs() < 2e-5);
+            proptest::prop_assert!((y32[b] as f64 - y[b]).abs() <= F32_VS_F64_MAX_ERROR);
         }
     }
 
@@ -631,7 +649,7 @@ proptest::proptest! {
         v in proptest::array::uniform6(0.0f64..1.0),
         physical in proptest::bool::ANY,
     ) {
-        let Some(d) = data() else { return Ok(()) };
+        let d = data();
         let model = Inform::new(d.tables.tables()).unwrap();
         let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
         let mut x = varied_inputs(&u, &v);
@@ -644,14 +662,14 @@ proptest::proptest! {
             x[20] = h;
             gap.push(closed_and_open(&model, &x, geometry).0);
         }
-        proptest::prop_assert!(gap[3] < 1e-9, "fc 40: {gap:?}");
+        proptest::prop_assert!(gap[3] <= CLOSED_CANOPY_MAX_GAP, "fc 40: {gap:?}");
         proptest::prop_assert!(gap[2] < gap[0], "{gap:?}");
         // Sparse stands approach the understory.
         let (cd, h) = magic_core::rtm::inform::crown_from_cover(1e-7, x[19]);
         x[18] = cd;
         x[20] = h;
         let (_, to_under, _) = closed_and_open(&model, &x, geometry);
-        proptest::prop_assert!(to_under < 1e-6, "{to_under}");
+        proptest::prop_assert!(to_under <= SPARSE_STAND_MAX_GAP, "{to_under}");
     }
 
     #[test]
@@ -673,9 +691,10 @@ proptest::proptest! {
             sail(&e, &l, &medium(e.bf, magic_core::rtm::prospect::LeafOptics { refl: rho, trans: tau }), soil)
         };
         let (p, q) = (run(tts, tto), run(tto, tts));
-        proptest::prop_assert!((p.rsot - q.rsot).abs() < 1e-10, "rsot {} {}", p.rsot, q.rsot);
-        proptest::prop_assert!((p.rdot - q.rsdt).abs() < 1e-10, "rdot/rsdt {} {}", p.rdot, q.rsdt);
-        proptest::prop_assert!((p.rddt - q.rddt).abs() < 1e-12);
+        let tol = RECIPROCITY_MAX_ERROR;
+        proptest::prop_assert!((p.rsot - q.rsot).abs() <= tol, "rsot {} {}", p.rsot, q.rsot);
+        proptest::prop_assert!((p.rdot - q.rsdt).abs() <= tol, "rdot/rsdt {} {}", p.rdot, q.rsdt);
+        proptest::prop_assert!((p.rddt - q.rddt).abs() <= tol);
     }
 }
 
@@ -684,7 +703,7 @@ proptest::proptest! {
 
 #[test]
 fn bad_inputs_are_errors() {
-    let Some(d) = data() else { return };
+    let d = data();
     let model = Inform::new(d.tables.tables()).unwrap();
     let good = inputs_from_learned(&box_point(&[0.5; N_LEARNED]), &Fixed::default());
     assert!(model.forward(&good, Geometry::Reference).is_ok());
@@ -756,57 +775,4 @@ fn bad_inputs_are_errors() {
             Geometry::Reference
         )
         .is_err());
-}
-
-/// Seconds of CPU time this thread has run (Linux `schedstat`), or wall time elsewhere: on a
-/// shared machine the wall clock also counts time spent waiting for a core.
-fn thread_seconds() -> f64 {
-    static START: OnceLock<std::time::Instant> = OnceLock::new();
-    let start = START.get_or_init(std::time::Instant::now);
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .map(|ns| ns * 1e-9)
-        .unwrap_or_else(|| start.elapsed().as_secs_f64())
-}
-
-/// Cost per spectrum in thread CPU time (run with `--ignored --test-threads=1` in release).
-#[test]
-#[ignore]
-fn timing() {
-    let Some(d) = data() else { return };
-    let model = Inform::new(d.tables.tables()).unwrap();
-    let fixed = Fixed::default();
-    let z = box_point(&[0.4; N_LEARNED]);
-    let x = inputs_from_learned(&z, &fixed);
-    let x32 = x.map(|v| v as f32);
-    let mut acc = 0.0;
-    let n = 3000;
-    let t0 = thread_seconds();
-    for k in 0..n {
-        let mut xx = x;
-        xx[1] += k as f64 * 1e-3;
-        acc += model.forward(&xx, Geometry::Reference).unwrap()[3];
-    }
-    let f64_us = (thread_seconds() - t0) / n as f64 * 1e6;
-    let t0 = thread_seconds();
-    for k in 0..n {
-        let mut xx = x32;
-        xx[1] += k as f32 * 1e-3;
-        acc += model.forward(&xx, Geometry::Reference).unwrap()[3] as f64;
-    }
-    let f32_us = (thread_seconds() - t0) / n as f64 * 1e6;
-    let m = 500;
-    let t0 = thread_seconds();
-    for k in 0..m {
-        let mut zz = z;
-        zz[1] += k as f64 * 1e-3;
-        acc += model.jacobian(&zz, &fixed, Geometry::Reference).unwrap().1[3][1];
-    }
-    let jac_us = (thread_seconds() - t0) / m as f64 * 1e6;
-    eprintln!(
-        "timing ({} wavelengths, thread CPU time): forward f64 {f64_us:.1} us, f32 {f32_us:.1} us, \
-         forward + Jacobian {jac_us:.1} us [{acc:.3}]",
-        model.sensor().n_active()
-    );
 }

@@ -3,7 +3,7 @@
 //! `magic forward rtm` against the oracle.
 //!
 //! Data are found through `MAGIC_DATA` or `../shared/data` next to the workspace; without them the
-//! tests print a notice and pass.
+//! tests fail, saying what to set.
 
 use magic_core::model_file::{Model, Problem};
 use magic_core::rtm::{Fixed, Geometry, N_LEARNED};
@@ -15,36 +15,48 @@ use magic_train::{
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-fn data_dir() -> Option<PathBuf> {
-    let dir = match std::env::var_os("MAGIC_DATA") {
-        Some(d) => PathBuf::from(d),
-        None => PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")),
-    };
-    if dir.join("rtm/prospect_d_coefficients.csv").exists() && dir.join("s2/train.csv").exists() {
-        Some(dir)
-    } else {
-        eprintln!(
-            "notice: RTM/S2 data not found at {} (set MAGIC_DATA); skipping",
-            dir.display()
-        );
-        None
-    }
+// Tolerances: the measured difference (printed by `-- --nocapture`) times 10, rounded up, unless
+// stated otherwise.
+
+/// How far an inverted variable may sit outside its bound, relative to the bound (f64 path; the
+/// sigmoid maps into the bounds): measured 0; the rounding of `min + (max − min) · u`.
+const BOUND_SLACK_REL: f64 = 4.0 * f64::EPSILON;
+/// Crown diameter and height derived from fc against the paper's eqs. 7–8 written out here,
+/// relative: measured 0 (the same operations); a few ulps.
+const CROWN_MAX_REL_ERROR: f64 = 4.0 * f64::EPSILON;
+/// The model file's f32 table rows against the f64 tables (band reflectance): measured 3.5e-9.
+const F32_ROWS_MAX_ERROR: f64 = 4e-8;
+/// The f32 inversion's reconstruction against the f64 one (reflectance): measured 6.1e-8.
+const F32_RECON_MAX_ERROR: f64 = 7e-7;
+/// `magic forward rtm` against the oracle file: measured 3.0e-14.
+const CLI_FORWARD_MAX_ERROR: f64 = 4e-13;
+/// The board's variables (printed with 6 decimals) against the host's, relative to
+/// max(|host|, 0.01): measured 3.9e-5 and 3.7e-5 (f32 INFORM and the printing).
+const BOARD_MAX_REL_ERROR: f64 = 4e-4;
+/// The board's residual RMS against the host's (reflectance): measured 4.8e-7 and 4.2e-7.
+const BOARD_RESIDUAL_MAX_ERROR: f64 = 5e-6;
+/// Band offsets added to INFORM's bands against the declared offsets (f32 in the file):
+/// measured 1.6e-9.
+const OFFSET_MAX_ERROR: f64 = 2e-8;
+
+/// The data folder, with the RTM tables and the Sentinel-2 extract (a test failure without them).
+fn data_dir() -> PathBuf {
+    magic_tests::data_with(&["rtm/prospect_d_coefficients.csv", "s2/train.csv", "oracle"])
 }
 
-fn setup() -> Option<&'static RtmProblem> {
-    static S: OnceLock<Option<RtmProblem>> = OnceLock::new();
+fn setup() -> &'static RtmProblem {
+    static S: OnceLock<RtmProblem> = OnceLock::new();
     S.get_or_init(|| {
-        let d = data_dir()?;
-        Some(RtmProblem::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap())
+        let d = data_dir();
+        RtmProblem::read(&d.join("s2"), &d.join("rtm"), Geometry::Reference).unwrap()
     })
-    .as_ref()
 }
 
 /// A short training run of B (few hundred spectra, 2 epochs), shared by the tests.
-fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
-    static M: OnceLock<Option<(OwnedModel, Vec<u8>)>> = OnceLock::new();
+fn trained_b() -> &'static (OwnedModel, Vec<u8>) {
+    static M: OnceLock<(OwnedModel, Vec<u8>)> = OnceLock::new();
     M.get_or_init(|| {
-        let s = setup()?;
+        let s = setup();
         let cfg = TrainConfig {
             epochs: 2,
             progress: false,
@@ -61,20 +73,20 @@ fn trained_b() -> Option<&'static (OwnedModel, Vec<u8>)> {
             log.best_valid
         );
         let bytes = model.encode().unwrap();
-        Some((model, bytes))
+        (model, bytes)
     })
-    .as_ref()
 }
 
 fn physical(data: &Dataset, row: &[f32]) -> Vec<f32> {
-    data.physical_row(row)
+    row.iter()
+        .enumerate()
+        .map(|(c, v)| (*v as f64 * data.scale[c] + data.mean[c]) as f32)
+        .collect()
 }
 
 #[test]
 fn short_training_run_of_b_gives_a_valid_small_model() {
-    let Some((model, bytes)) = trained_b() else {
-        return;
-    };
+    let (model, bytes) = trained_b();
     assert_eq!(model.variant, Variant::B);
     assert!(
         bytes.len() <= 256 * 1024,
@@ -84,33 +96,45 @@ fn short_training_run_of_b_gives_a_valid_small_model() {
     let m = Model::decode(bytes).unwrap();
     assert_eq!(m.n_obs(), 11);
     assert_eq!(m.n_params(), N_LEARNED);
-    let s = setup().unwrap();
+    let s = setup();
     let mut ws = Workspace::default();
+    let (mut outside, mut crown) = (0f64, 0f64);
     for row in s.data.test.x.iter().take(50) {
         let inv = invert::<f64>(&m, &physical(&s.data, row), &mut ws).unwrap();
         // 7 learned variables, then cd and h.
         assert_eq!(inv.n_params, N_LEARNED + 2);
         for (j, b) in m.bounds.iter().enumerate() {
-            assert!(inv.params[j] >= b[0] as f64 - 1e-6 && inv.params[j] <= b[1] as f64 + 1e-6);
+            let out = (b[0] as f64 - inv.params[j]).max(inv.params[j] - b[1] as f64);
+            outside = outside.max(out);
+            let slack = BOUND_SLACK_REL * b[0].abs().max(b[1].abs()) as f64;
+            assert!(
+                out <= slack,
+                "variable {j}: {} outside {b:?}",
+                inv.params[j]
+            );
         }
         let (cd, h) = (inv.params[7], inv.params[8]);
         let want_cd = 2.0 * (inv.params[6] * 1e4 / (std::f64::consts::PI * 500.0)).sqrt();
-        assert!((cd - want_cd).abs() < 1e-9 && (h - (2.117 + 0.507 * cd.ln()).exp()).abs() < 1e-9);
+        let want_h = (2.117 + 0.507 * cd.ln()).exp();
+        let err = ((cd - want_cd) / want_cd)
+            .abs()
+            .max(((h - want_h) / want_h).abs());
+        crown = crown.max(err);
+        assert!(err <= CROWN_MAX_REL_ERROR, "cd {cd}, h {h}: {err:e}");
         assert!(inv.recon[..11]
             .iter()
             .all(|v| v.is_finite() && *v > 0.0 && *v < 1.0));
     }
+    eprintln!("RTM B: largest excursion outside a bound {outside:.2e}, crown formulas {crown:.2e}");
 }
 
 #[test]
 fn model_file_round_trip_matches_the_f64_tables() {
-    let Some((_, bytes)) = trained_b() else {
-        return;
-    };
-    let d = data_dir().unwrap();
+    let (_, bytes) = trained_b();
+    let d = data_dir();
     let tables = RtmTables::read(&d.join("rtm")).unwrap();
     let full = tables.inform().unwrap();
-    let s = setup().unwrap();
+    let s = setup();
     let m = Model::decode(bytes).unwrap();
     // Decode → encode again gives the same bytes.
     assert_eq!(&OwnedModel::from_model(&m).encode().unwrap(), bytes);
@@ -126,26 +150,33 @@ fn model_file_round_trip_matches_the_f64_tables() {
             worst = worst.max((inv.recon[k] - y[b]).abs());
         }
     }
-    assert!(worst < 1e-4, "f32 table rows vs f64 tables: {worst}");
+    assert!(
+        worst <= F32_ROWS_MAX_ERROR,
+        "f32 table rows vs f64 tables: {worst}"
+    );
     // f32 physics on the board's path agrees too.
     let row = physical(&s.data, &s.data.test.x[0]);
     let a = invert::<f64>(&m, &row, &mut ws).unwrap();
     let b = invert::<f32>(&m, &row, &mut ws).unwrap();
+    let mut recon = 0f64;
     for k in 0..11 {
+        let d = (a.recon[k] - b.recon[k] as f64).abs();
+        recon = recon.max(d);
         assert!(
-            (a.recon[k] - b.recon[k] as f64).abs() < 1e-4,
+            d <= F32_RECON_MAX_ERROR,
             "band {k}: {} vs {}",
             a.recon[k],
             b.recon[k]
         );
     }
+    eprintln!(
+        "RTM model file: f32 rows vs f64 tables {worst:.2e}, f32 vs f64 reconstruction {recon:.2e}"
+    );
 }
 
 #[test]
 fn corrupt_and_inconsistent_rtm_files_are_errors() {
-    let Some((model, bytes)) = trained_b() else {
-        return;
-    };
+    let (model, bytes) = trained_b();
     // Flipped bits anywhere (CRC).
     for i in (0..bytes.len()).step_by(bytes.len() / 97) {
         let mut c = bytes.clone();
@@ -231,17 +262,14 @@ fn corrupt_and_inconsistent_rtm_files_are_errors() {
     // GNSS effects are not RTM effects; illumination needs the physical geometry (this model is
     // in the reference geometry).
     let e = with(&|o| o.effects.push(OwnedEffect::CommonMode));
-    assert!(
-        e.contains("only the illumination and band-offset effects"),
-        "{e}"
-    );
-    let e = with(&|o| o.effects.push(setup().unwrap().illumination()));
+    assert!(e.contains("not an RTM effect"), "{e}");
+    let e = with(&|o| o.effects.push(setup().illumination()));
     assert!(e.contains("physical geometry"), "{e}");
 }
 
 #[test]
 fn forward_rtm_command_matches_the_oracle() {
-    let Some(d) = data_dir() else { return };
+    let d = data_dir();
     let oracle = d.join("oracle/rtm_inform_s2_10k.csv");
     let text = std::fs::read_to_string(&oracle).unwrap();
     let head: String = text.lines().take(301).map(|l| format!("{l}\n")).collect();
@@ -285,22 +313,38 @@ fn forward_rtm_command_matches_the_oracle() {
             worst = worst.max((a - e).abs());
         }
     }
-    assert!(worst < 1e-10, "forward rtm vs oracle: {worst}");
+    eprintln!("forward rtm vs oracle: {worst:.2e}");
+    assert!(
+        worst <= CLI_FORWARD_MAX_ERROR,
+        "forward rtm vs oracle: {worst}"
+    );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The board's variables (`got`, a result line parsed) against the host's inversion, relative to
+/// max(|host|, 0.01); returns the largest difference.
+fn board_agrees(got: &[f64], inv: &magic_core::Inversion<f64>, line: &str) -> f64 {
+    let mut worst = 0f64;
+    for (j, (&a, &e)) in got.iter().zip(&inv.params[..inv.n_params]).enumerate() {
+        let rel = (a - e).abs() / e.abs().max(1e-2);
+        worst = worst.max(rel);
+        assert!(
+            rel <= BOARD_MAX_REL_ERROR,
+            "{line}: variable {j}: board {a}, host {e}"
+        );
+    }
+    worst
 }
 
 /// The RTM model on the Cortex-M4F under QEMU (f32 physics from the model file's f32 rows)
 /// agrees with the host's f64 inversion. Skipped when the toolchain or QEMU is missing.
 #[test]
 fn rtm_model_runs_on_the_firmware_under_qemu() {
-    let Some((_, bytes)) = trained_b() else {
-        return;
-    };
-    if let Err(e) = magic_train::firmware::qemu::ensure_toolchain() {
-        eprintln!("notice: no firmware toolchain ({e}); skipping");
+    let (_, bytes) = trained_b();
+    if !magic_tests::toolchain_ready() {
         return;
     }
-    let s = setup().unwrap();
+    let s = setup();
     let dir = std::env::temp_dir().join(format!("magic-rtm-fw-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rtm_b.magic");
@@ -329,29 +373,25 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
     assert_eq!(run.results.len(), rows.len());
     let m = Model::decode(bytes).unwrap();
     let mut ws = Workspace::default();
-    let mut worst_res = 0f64;
+    let (mut worst_res, mut worst_var) = (0f64, 0f64);
     for (row, line) in rows.iter().zip(&run.results) {
         let inv = invert::<f64>(&m, row, &mut ws).unwrap();
         let got: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
         assert_eq!(got.len(), inv.n_params + 3, "{line}");
-        for j in 0..inv.n_params {
-            let (a, e) = (got[j], inv.params[j]);
-            assert!(
-                (a - e).abs() <= 1e-3 * e.abs().max(1e-2),
-                "variable {j}: board {a}, host {e}"
-            );
-        }
+        worst_var = worst_var.max(board_agrees(&got, &inv, line));
         // The residual RMS (reflectance) of the board's f32 INFORM reconstruction against the
         // host's f64 one: it differs by at most the largest difference of the reconstructions.
         let res = got[inv.n_params];
         worst_res = worst_res.max((res - inv.residual_rms).abs());
         assert!(
-            (res - inv.residual_rms).abs() <= 1e-4,
+            (res - inv.residual_rms).abs() <= BOARD_RESIDUAL_MAX_ERROR,
             "residual: board {res}, host {}",
             inv.residual_rms
         );
     }
-    eprintln!("RTM residual RMS, board vs host: largest difference {worst_res:.2e}");
+    eprintln!(
+        "RTM board vs host: variables {worst_var:.2e} (relative), residual RMS {worst_res:.2e}"
+    );
     eprintln!(
         "RTM on the board: {:?} instructions per inversion, stack {:?} bytes, flash {:?} bytes",
         run.instructions_per_inversion, run.stack_bytes, run.flash_bytes
@@ -363,21 +403,20 @@ fn rtm_model_runs_on_the_firmware_under_qemu() {
 /// `invert`, reproduce its Table 3 test MSE and its physics-only MSE.
 #[test]
 fn released_c_weights_reproduce_the_paper_through_our_forward_model() {
-    let Some(s) = setup() else { return };
-    let w = data_dir()
-        .unwrap()
-        .join("oracle/pretrained_rtm_c_weights.json");
+    let s = setup();
+    let w = data_dir().join("oracle/pretrained_rtm_c_weights.json");
     let model = magic_train::rtm::released::released_c(s, &w).unwrap();
     let bytes = model.encode().unwrap();
     let m = Model::decode(&bytes).unwrap();
     let r = magic_train::evaluate(&m, &s.data.test, "test").unwrap();
     let p = r.physics_mse.unwrap();
     eprintln!(
-        "released C through our F: test MSE {:.4}, physics-only {p:.4}",
+        "released C through our F: test MSE {:.6}, physics-only {p:.6}",
         r.mse
     );
-    assert!((r.mse - 0.0217).abs() < 1e-3, "test MSE {}", r.mse);
-    assert!((p - 1.04).abs() < 0.02, "physics-only MSE {p}");
+    // The paper prints 0.0217 and 1.04 (Table 3): ours must round to the same digits.
+    assert!((r.mse - 0.0217).abs() <= 0.5e-4, "test MSE {}", r.mse);
+    assert!((p - 1.04).abs() <= 0.5e-2, "physics-only MSE {p}");
 }
 
 /// The S2 reader names the file, line and column of a bad cell, and finds bands by prefix.
@@ -422,9 +461,7 @@ fn s2_reader_reports_bad_cells_by_file_line_and_column() {
 fn undeclared_illumination_is_found_in_synthetic_spectra() {
     use magic_train::{analyse, AnalysisOptions};
     use rand::{Rng, SeedableRng};
-    let Some(d) = data_dir() else {
-        return;
-    };
+    let d = data_dir();
     let mut setup = RtmProblem::read(&d.join("s2"), &d.join("rtm"), Geometry::Physical).unwrap();
     let truth = setup.physics(&[setup.illumination()]).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
@@ -493,11 +530,8 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
 /// results.
 #[test]
 fn rtm_illumination_model_runs_on_the_firmware() {
-    let Some((model, _)) = trained_b() else {
-        return;
-    };
-    if let Err(e) = magic_train::firmware::qemu::ensure_toolchain() {
-        eprintln!("notice: no firmware toolchain ({e}); skipping");
+    let (model, _) = trained_b();
+    if !magic_tests::toolchain_ready() {
         return;
     }
     let mut m = model.clone();
@@ -505,7 +539,7 @@ fn rtm_illumination_model_runs_on_the_firmware() {
         *geometry = Geometry::Physical;
     }
     m.effects = vec![
-        setup().unwrap().illumination(),
+        setup().illumination(),
         OwnedEffect::BandOffset {
             offset: (0..11).map(|b| 0.002 * b as f32 - 0.01).collect(),
         },
@@ -520,10 +554,13 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     let mut plain = decoded.clone();
     plain.effects.truncate(1);
     magic_core::invert::forward::<f64>(&plain, &z, 17_700.0, &mut without).unwrap();
+    let mut off = 0f64;
     for (b, (w, o)) in with.iter().zip(&without).enumerate() {
-        assert!((w - o - (0.002 * b as f64 - 0.01)).abs() < 1e-7, "band {b}");
+        let d = (w - o - (0.002 * b as f64 - 0.01)).abs();
+        off = off.max(d);
+        assert!(d <= OFFSET_MAX_ERROR, "band {b}: {d:e}");
     }
-    let s = setup().unwrap();
+    let s = setup();
     let dir = std::env::temp_dir().join(format!("magic-rtm-ill-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("rtm_ill.magic");
@@ -547,20 +584,21 @@ fn rtm_illumination_model_runs_on_the_firmware() {
     assert!(run.success, "firmware failed: {}", run.stderr);
     assert_eq!(run.results.len(), lines.len());
     let mut ws = Workspace::default();
+    let (mut worst_var, mut worst_res) = (0f64, 0f64);
     for (line, got) in lines.iter().zip(&run.results) {
         let mut obs = vec![0f32; 11];
         let day = magic_core::line::parse_record(line, true, &mut obs).unwrap();
         let inv = magic_core::invert_at::<f64>(&decoded, &obs, day, &mut ws).unwrap();
         let got: Vec<f64> = got.split(',').map(|f| f.parse().unwrap()).collect();
         assert_eq!(got.len(), inv.n_params + 3);
-        for j in 0..inv.n_params {
-            let (a, e) = (got[j], inv.params[j]);
-            assert!(
-                (a - e).abs() <= 1e-3 * e.abs().max(1e-2),
-                "{line}: variable {j}: board {a}, host {e}"
-            );
-        }
-        assert!((got[inv.n_params] - inv.residual_rms).abs() <= 1e-4);
+        worst_var = worst_var.max(board_agrees(&got, &inv, line));
+        let res = (got[inv.n_params] - inv.residual_rms).abs();
+        worst_res = worst_res.max(res);
+        assert!(res <= BOARD_RESIDUAL_MAX_ERROR, "{line}: residual {res:e}");
     }
+    eprintln!(
+        "RTM illumination model, board vs host: variables {worst_var:.2e} (relative), residual RMS \
+         {worst_res:.2e}; band offsets {off:.2e}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

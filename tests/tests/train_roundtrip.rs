@@ -5,6 +5,13 @@ use magic_core::Model;
 use magic_train::gnss::synth;
 use magic_train::{evaluate, train_model, ModelKind, TrainConfig};
 
+/// The exported f32 model's validation MSE through the core (`invert`, physics in f64) against
+/// the trainer's (candle, f32): measured 2.3e-7 (MSE ≈ 1); 10× that.
+const CORE_VS_TRAINER_MAX_MSE_GAP: f64 = 2.5e-6;
+/// The int8 model's test MSE against the f32 model's (the runs are seeded, hence repeatable):
+/// measured 3.1e-4; 10× that, rounded up.
+const INT8_VS_F32_MAX_MSE_GAP: f64 = 3.5e-3;
+
 #[test]
 fn tiny_training_exports_and_inverts() {
     let p = synth::generate(synth::Scenario::Clean, 11).problem;
@@ -34,14 +41,19 @@ fn tiny_training_exports_and_inverts() {
     assert!(log.best_valid <= log.history[0].1);
     // Early-stopping restores the best weights: the exported model scores its best validation MSE.
     let ev = evaluate(&fm, &data.valid, "valid").unwrap();
+    eprintln!(
+        "valid MSE: core {:.3e} off the trainer's; test MSE: int8 {:.3e} off f32",
+        (ev.mse - log.best_valid).abs(),
+        (eq.mse - ef.mse).abs()
+    );
     assert!(
-        (ev.mse - log.best_valid).abs() < 1e-3,
+        (ev.mse - log.best_valid).abs() <= CORE_VS_TRAINER_MAX_MSE_GAP,
         "{} vs {}",
         ev.mse,
         log.best_valid
     );
     assert!(
-        (eq.mse - ef.mse).abs() < 0.02,
+        (eq.mse - ef.mse).abs() <= INT8_VS_F32_MAX_MSE_GAP,
         "int8 {} vs f32 {}",
         eq.mse,
         ef.mse

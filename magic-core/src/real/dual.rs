@@ -5,7 +5,7 @@
 //! dual's [`Real::Lanes`] is that lane form ([`DualScalar`]), so physics evaluated on lanes of
 //! wavelengths carries its derivatives the same way.
 
-use super::{DualScalar, Lanes, Real};
+use super::{Cmp, DualScalar, Lanes, Real};
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 /// A forward-mode dual number `v + Σ dᵢ εᵢ` with `N` independent infinitesimals, on the plain
@@ -65,19 +65,6 @@ impl<const N: usize, T: Real<Plain = T>> Dual<N, T> {
             *x *= df;
         }
         Dual { v: f, d }
-    }
-    /// `a` where `pred` holds for `decider`, else `b`, lane by lane when `T` is lanes.
-    #[inline]
-    fn pick(decider: T, pred: impl Fn(f64) -> bool + Copy, a: Self, b: Self) -> Self {
-        let choose = |x: T, y: T| decider.select(pred, || x, || y);
-        let mut d = a.d;
-        for (x, y) in d.iter_mut().zip(b.d) {
-            *x = choose(*x, y);
-        }
-        Dual {
-            v: choose(a.v, b.v),
-            d,
-        }
     }
 }
 
@@ -168,6 +155,7 @@ assign_op!(DivAssign, div_assign, /);
 impl<const N: usize, T: DualScalar> Real for Dual<N, T> {
     type Plain = T;
     type Lanes = Dual<N, T::DualLanes>;
+    type Mask = T::Mask;
     #[inline]
     fn c(v: f64) -> Self {
         Self::from_plain(T::c(v))
@@ -188,27 +176,27 @@ impl<const N: usize, T: DualScalar> Real for Dual<N, T> {
         }
     }
     #[inline(always)]
-    fn select(
-        self,
-        pred: impl Fn(f64) -> bool,
-        a: impl FnOnce() -> Self,
-        b: impl FnOnce() -> Self,
-    ) -> Self {
-        if self.v.all(&pred) {
-            a()
-        } else if !self.v.any(&pred) {
-            b()
-        } else {
-            Self::pick(self.v, &pred, a(), b())
+    fn mask(self, cmp: Cmp) -> T::Mask {
+        self.v.mask(cmp)
+    }
+    #[inline(always)]
+    fn blend(m: T::Mask, a: Self, b: Self) -> Self {
+        let mut d = a.d;
+        for (x, y) in d.iter_mut().zip(b.d) {
+            *x = T::blend(m, *x, y);
+        }
+        Dual {
+            v: T::blend(m, a.v, b.v),
+            d,
         }
     }
-    #[inline]
-    fn all(self, pred: impl Fn(f64) -> bool) -> bool {
-        self.v.all(pred)
+    #[inline(always)]
+    fn mask_all(m: T::Mask) -> bool {
+        T::mask_all(m)
     }
-    #[inline]
-    fn any(self, pred: impl Fn(f64) -> bool) -> bool {
-        self.v.any(pred)
+    #[inline(always)]
+    fn mask_any(m: T::Mask) -> bool {
+        T::mask_any(m)
     }
     #[inline]
     fn value(self) -> f64 {
@@ -286,15 +274,15 @@ impl<const N: usize, T: DualScalar> Real for Dual<N, T> {
     }
     #[inline]
     fn abs(self) -> Self {
-        self.select(|v| v < 0.0, || -self, || self)
+        self.select(Cmp::Lt(0.0), || -self, || self)
     }
     #[inline]
     fn max(self, o: Self) -> Self {
-        Self::pick(self.v - o.v, |d| d >= 0.0, self, o)
+        Self::blend((self.v - o.v).mask(Cmp::Ge(0.0)), self, o)
     }
     #[inline]
     fn min(self, o: Self) -> Self {
-        Self::pick(self.v - o.v, |d| d <= 0.0, self, o)
+        Self::blend((self.v - o.v).mask(Cmp::Le(0.0)), self, o)
     }
     #[inline]
     fn e1(self) -> Self {
@@ -339,57 +327,75 @@ mod tests {
     use super::*;
     use crate::real::e1_f64;
 
-    fn check(f: impl Fn(Dual<1>) -> Dual<1>, g: impl Fn(f64) -> f64, x: f64) {
+    /// A dual's value against the plain function, relative to 1 + |value|: measured 1.6e-16;
+    /// about 4 ulps.
+    const VALUE_MAX_REL_ERROR: f64 = 1e-15;
+    /// A dual's derivative against a central difference (step 1e-6), relative to
+    /// 1 + |difference|: measured 6.9e-11, the difference's own error; 10× that.
+    const DERIVATIVE_MAX_REL_ERROR: f64 = 7e-10;
+
+    /// Checks one function at `x`; returns the value's and the derivative's relative errors.
+    fn check(f: impl Fn(Dual<1>) -> Dual<1>, g: impl Fn(f64) -> f64, x: f64) -> (f64, f64) {
         let d = f(Dual::var(x, 0));
         let h = 1e-6 * (1.0 + libm::fabs(x));
         let fd = (g(x + h) - g(x - h)) / (2.0 * h);
-        assert!((d.v - g(x)).abs() < 1e-12 * (1.0 + g(x).abs()));
+        let value = (d.v - g(x)).abs() / (1.0 + g(x).abs());
+        let derivative = (d.d[0] - fd).abs() / (1.0 + fd.abs());
+        assert!(value <= VALUE_MAX_REL_ERROR, "x={x}: {} vs {}", d.v, g(x));
         assert!(
-            (d.d[0] - fd).abs() < 1e-6 * (1.0 + fd.abs()),
+            derivative <= DERIVATIVE_MAX_REL_ERROR,
             "x={x}: {} vs {fd}",
             d.d[0]
         );
+        (value, derivative)
     }
 
     #[test]
     fn elementary_derivatives_match_central_differences() {
+        extern crate std;
+        let (mut value, mut derivative) = (0f64, 0f64);
+        let mut worst = |(v, d): (f64, f64)| {
+            value = value.max(v);
+            derivative = derivative.max(d);
+        };
         for &x in &[0.3, 0.7, 1.3, 2.5] {
-            check(|v| v.sqrt(), |v| v.sqrt(), x);
-            check(|v| v.exp(), |v| v.exp(), x);
-            check(|v| v.ln(), |v| v.ln(), x);
-            check(|v| v.sin(), |v| v.sin(), x);
-            check(|v| v.cos(), |v| v.cos(), x);
-            check(|v| v.tan(), |v| v.tan(), x);
-            check(|v| v.atan(), |v| v.atan(), x);
-            check(|v| v.e1(), e1_f64, x);
-            check(|v| v.powi(3), |v| v * v * v, x);
-            check(|v| v.powf(Dual::c(1.7)), |v| v.powf(1.7), x);
-            check(|v| v / (v + Dual::c(1.0)), |v| v / (v + 1.0), x);
-            check(|v| v.atan2(Dual::c(0.4)), |v| v.atan2(0.4), x);
+            worst(check(|v| v.sqrt(), |v| v.sqrt(), x));
+            worst(check(|v| v.exp(), |v| v.exp(), x));
+            worst(check(|v| v.ln(), |v| v.ln(), x));
+            worst(check(|v| v.sin(), |v| v.sin(), x));
+            worst(check(|v| v.cos(), |v| v.cos(), x));
+            worst(check(|v| v.tan(), |v| v.tan(), x));
+            worst(check(|v| v.atan(), |v| v.atan(), x));
+            worst(check(|v| v.e1(), e1_f64, x));
+            worst(check(|v| v.powi(3), |v| v * v * v, x));
+            worst(check(|v| v.powf(Dual::c(1.7)), |v| v.powf(1.7), x));
+            worst(check(|v| v / (v + Dual::c(1.0)), |v| v / (v + 1.0), x));
+            worst(check(|v| v.atan2(Dual::c(0.4)), |v| v.atan2(0.4), x));
         }
         for &x in &[-0.5, 0.2, 0.8] {
-            check(|v| v.acos(), |v| v.acos(), x);
-            check(|v| v.asin(), |v| v.asin(), x);
+            worst(check(|v| v.acos(), |v| v.acos(), x));
+            worst(check(|v| v.asin(), |v| v.asin(), x));
         }
+        std::eprintln!("dual numbers: value {value:.2e}, derivative {derivative:.2e} (relative)");
     }
 
     #[test]
     fn lanes_of_duals_are_duals_lane_by_lane() {
         use crate::real::F64x4;
         let xs = [0.3, 0.7, 1.3, 2.5];
-        let x = Dual::<2, F64x4>::seed(F64x4(xs), 0);
-        let y = Dual::<2, F64x4>::seed(F64x4([2.0, -1.0, 0.5, 3.0]), 1);
+        let x = Dual::<2, F64x4>::seed(F64x4::new(xs), 0);
+        let y = Dual::<2, F64x4>::seed(F64x4::new([2.0, -1.0, 0.5, 3.0]), 1);
         let f = |x: Dual<2, F64x4>, y: Dual<2, F64x4>| {
             (x * y).exp() / (x + y.abs()).sqrt() + x.e1_and_exp().0 - x.max(y)
         };
         let g = f(x, y);
         for (i, &xi) in xs.iter().enumerate() {
-            let (x1, y1) = (Dual::<2>::var(xi, 0), Dual::<2>::var(y.v.0[i], 1));
+            let (x1, y1) = (Dual::<2>::var(xi, 0), Dual::<2>::var(y.v.to_array()[i], 1));
             let want = (x1 * y1).exp() / (x1 + y1.abs()).sqrt() + x1.e1_and_exp().0 - x1.max(y1);
             assert_eq!(g.lane(i), want);
         }
         // A select whose lanes disagree takes each lane's own branch, derivatives included.
-        let s = x.select(|v| v > 1.0, || x * x, || -x);
+        let s = x.select(Cmp::Gt(1.0), || x * x, || -x);
         assert_eq!(s.lane(0), -Dual::<2>::var(0.3, 0));
         assert_eq!(s.lane(3), Dual::<2>::var(2.5, 0) * Dual::<2>::var(2.5, 0));
     }

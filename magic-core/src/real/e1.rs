@@ -6,9 +6,12 @@
 //! patches of e^x·E1(x) on (1, 10] (coefficients computed at compile time from the differential
 //! equation the function obeys), and the continued fraction above (Abramowitz & Stegun 5.1.11
 //! and 5.1.22). The stated bound is checked against a table of 40-digit values in the tests.
-//! [`e1_with_exp4`] evaluates four lanes with the same steps, bit for bit.
+//! Lanes evaluate it with the same steps and these tables (`lanes::e1x4`), bit for bit.
+//!
+//! [`e1_f32`] is the same function in `f32` arithmetic for the `f32` path (the board, `f32`
+//! lanes): the series to fewer terms, the Taylor patches to fewer terms, the continued fraction
+//! (never met by PROSPECT's absorptions, and overflowing `f32`) through [`e1_f64`].
 
-use super::lanes::{all, any, blend, mask, F64x4};
 use super::Real;
 
 /// Largest relative error of [`e1_f64`] against 40-digit test vectors on (1e-12, 80).
@@ -17,6 +20,8 @@ pub const E1_MAX_REL_ERROR: f64 = 2e-15;
 /// Terms of the power series `Ein(x) = Σ_{k≥1} (−1)^(k+1) x^k / (k·k!)` summed for x ≤ 1: the
 /// first term left out is below 3e-20 there, far below the sum (≥ 0.2 relative to E1).
 const EIN_TERMS: usize = 20;
+// `ein` sums the terms as five cubics.
+const _: () = assert!(EIN_TERMS == 20);
 
 /// The series coefficients `(−1)^(k+1) / (k·k!)`, k = 1..=EIN_TERMS (index k − 1).
 const EIN: [f64; EIN_TERMS] = {
@@ -33,27 +38,64 @@ const EIN: [f64; EIN_TERMS] = {
 };
 
 /// Euler–Mascheroni constant γ.
-const EULER_GAMMA: f64 = 0.577_215_664_901_532_9;
+pub(in crate::real) const EULER_GAMMA: f64 = 0.577_215_664_901_532_9;
 
-/// `Ein(x)` by Horner's rule on the fixed series (x ≤ 1), for any [`Real`] (so scalar and lanes
-/// take the same steps).
+/// `Ein(x)` on the fixed series (x ≤ 1), for any [`Real`] (so scalar and lanes take the same
+/// steps), by Estrin's scheme: `Σ cₖ xᵏ = x·(p₀(x) + x⁴·p₁(x) + x⁸·p₂(x) + …)` with the cubics
+/// `pⱼ(x) = c₄ⱼ₊₁ + c₄ⱼ₊₂ x + x²(c₄ⱼ₊₃ + c₄ⱼ₊₄ x)`: the same number of operations as Horner's rule
+/// but a chain of 12 dependent operations instead of 40 (it lies on the path of every
+/// wavelength's computation).
 #[inline(always)]
-fn ein<R: Real>(x: R) -> R {
-    let mut s = R::c(EIN[EIN_TERMS - 1]);
-    for &c in EIN[..EIN_TERMS - 1].iter().rev() {
-        s = s * x + R::c(c);
+pub(in crate::real) fn ein<R: Real>(x: R) -> R {
+    let c = |k: usize| R::c(EIN[k]);
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    let cubic = |j: usize| (c(4 * j) + c(4 * j + 1) * x) + x2 * (c(4 * j + 2) + c(4 * j + 3) * x);
+    let (p0, p1, p2, p3, p4) = (cubic(0), cubic(1), cubic(2), cubic(3), cubic(4));
+    let x8 = x4 * x4;
+    // p₀ + x⁴p₁ + x⁸(p₂ + x⁴p₃) + x¹⁶p₄
+    x * ((p0 + x4 * p1) + x8 * ((p2 + x4 * p3) + x8 * p4))
+}
+
+/// `Ein(x)` to 12 terms (x ≤ 1, enough for `f32`: the first term left out is below 2.3e-9), by
+/// Estrin's scheme as [`ein`].
+#[inline(always)]
+pub(in crate::real) fn ein12<R: Real>(x: R) -> R {
+    let c = |k: usize| R::c(EIN[k]);
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    let cubic = |j: usize| (c(4 * j) + c(4 * j + 1) * x) + x2 * (c(4 * j + 2) + c(4 * j + 3) * x);
+    x * (cubic(0) + x4 * (cubic(1) + x4 * cubic(2)))
+}
+
+/// E1 on its series, given `ln x`: `−γ − ln x + Ein(x)` (x ≤ 1), with the terms `ein` sums.
+#[inline(always)]
+pub(in crate::real) fn e1_series<R: Real>(ln_x: R, ein: R) -> R {
+    R::c(-EULER_GAMMA) - ln_x + ein
+}
+
+/// Taylor terms per patch in `f32` (|x − x0| / x0 ≤ 1/9 leaves < 3e-9).
+pub(in crate::real) const E1_TAYLOR_TERMS_F32: usize = 9;
+
+/// `h(x0 + d) = e^(x0 + d)·E1(x0 + d)` on the patch `row` of [`E1_TAYLOR`] to `terms` terms, by
+/// Horner's rule (coefficients rounded to `R`).
+#[inline(always)]
+pub(in crate::real) fn taylor_h<R: Real>(row: &[f64; E1_TAYLOR_TERMS], terms: usize, d: R) -> R {
+    let mut h = R::zero();
+    for &a in row[..terms].iter().rev() {
+        h = h * d + R::c(a);
     }
-    s * x
+    h
 }
 
 /// Largest argument for which [`e1_f64`] sums the power series.
-const E1_SERIES_MAX: f64 = 1.0;
+pub(in crate::real) const E1_SERIES_MAX: f64 = 1.0;
 /// Taylor patches of `h(x) = e^x·E1(x)`: width 0.25 on (1, 4], width 0.5 on (4, 10].
-const E1_PATCHES: usize = 24;
+pub(in crate::real) const E1_PATCHES: usize = 24;
 /// Taylor terms per patch (|x − x0| / x0 ≤ 1/9 leaves < 1e-17).
-const E1_TAYLOR_TERMS: usize = 18;
+pub(in crate::real) const E1_TAYLOR_TERMS: usize = 18;
 /// Above this the continued fraction converges in fewer than 20 steps.
-const E1_TAYLOR_MAX: f64 = 10.0;
+pub(in crate::real) const E1_TAYLOR_MAX: f64 = 10.0;
 
 /// `e^x·E1(x)` by backward evaluation of the continued fraction
 /// `1/(x + 1 − 1²/(x + 3 − 2²/(x + 5 − …)))` to `depth` levels (const, for the Taylor patches).
@@ -69,7 +111,7 @@ const fn h_cf(x: f64, depth: usize) -> f64 {
 }
 
 /// Patch centres.
-const fn patch_centre(i: usize) -> f64 {
+pub(in crate::real) const fn patch_centre(i: usize) -> f64 {
     if i < 12 {
         1.125 + 0.25 * i as f64
     } else {
@@ -81,7 +123,7 @@ const fn patch_centre(i: usize) -> f64 {
 /// `h' = h − 1/x`, so with `h = Σ aₙ (x − x0)ⁿ`:
 /// `aₙ₊₁ = (aₙ − (−1)ⁿ / x0ⁿ⁺¹) / (n + 1)`, started from `a₀ = h(x0)` (continued fraction, 1500
 /// levels). Computed at compile time; errors in aₙ are damped by the 1/(n+1) factors.
-const E1_TAYLOR: [[f64; E1_TAYLOR_TERMS]; E1_PATCHES] = {
+pub(in crate::real) const E1_TAYLOR: [[f64; E1_TAYLOR_TERMS]; E1_PATCHES] = {
     let mut t = [[0.0; E1_TAYLOR_TERMS]; E1_PATCHES];
     let mut i = 0;
     while i < E1_PATCHES {
@@ -119,24 +161,13 @@ pub fn e1_with_exp(x: f64, ex: f64) -> f64 {
     }
     if x <= E1_SERIES_MAX {
         // E1(x) = −γ − ln x + Ein(x).
-        -EULER_GAMMA - libm::log(x) + ein(x)
+        e1_series(libm::log(x), ein(x))
     } else if x <= E1_TAYLOR_MAX {
-        let i = if x <= 4.0 {
-            libm::floor((x - 1.0) * 4.0) as usize
-        } else {
-            12 + libm::floor((x - 4.0) * 2.0) as usize
-        }
-        .min(E1_PATCHES - 1);
-        let c = &E1_TAYLOR[i];
-        let d = x - patch_centre(i);
-        let mut h = 0.0;
-        for &a in c.iter().rev() {
-            h = h * d + a;
-        }
-        ex * h
+        let i = patch_index(x);
+        ex * taylor_h(&E1_TAYLOR[i], E1_TAYLOR_TERMS, x - patch_centre(i))
     } else {
         // Forward recurrence of the continued fraction (one division); depth for 1e-16.
-        let depth = 8 + libm::ceil(110.0 / x) as usize;
+        let depth = cf_depth(x);
         let (mut a_prev, mut a) = (1.0f64, 0.0f64); // A_{-1}, A_0
         let (mut b_prev, mut b) = (0.0f64, 1.0f64); // B_{-1}, B_0
         for j in 1..=depth {
@@ -154,123 +185,58 @@ pub fn e1_with_exp(x: f64, ex: f64) -> f64 {
     }
 }
 
-/// [`e1_with_exp`] for four lanes: each lane takes the same steps as the scalar function (the
-/// series with its own stopping term, the Taylor patch of its own argument, the continued
-/// fraction to its own depth), so every lane equals the scalar result bit for bit. A regime is
-/// evaluated only when some lane needs it.
-pub(crate) fn e1_with_exp4(x: F64x4, ex: F64x4) -> F64x4 {
-    if !all(mask(x, |v| v > 0.0)) {
-        return x.zip(ex, e1_with_exp);
-    }
-    let series = mask(x, |v| v <= E1_SERIES_MAX);
-    let taylor = mask(x, |v| v > E1_SERIES_MAX && v <= E1_TAYLOR_MAX);
-    let cf = mask(x, |v| v > E1_TAYLOR_MAX);
-    let mut out = F64x4::c(0.0);
-    if any(series) {
-        out = blend(series, e1_series4(series, x), out);
-    }
-    if any(taylor) {
-        out = blend(taylor, ex * e1_taylor4(x), out);
-    }
-    if any(cf) {
-        let (a, b) = e1_cf4(cf, x);
-        out = blend(cf, ex * a / b, out);
-    }
-    out
+/// Largest relative error of [`e1_f32`] against E1 on (1e-8, 80): measured 5.8e-7 (at x ≈ 0.98,
+/// 2·10⁶ log-spaced points; E1 rounded to `f32` alone is within 6e-8: the loss is the
+/// cancellation in `−γ − ln x + Ein(x)` near 1), bound with a margin of 40 %.
+pub const E1_F32_MAX_REL_ERROR: f64 = 8e-7;
+
+/// The exponential integral E1(x), x > 0, in `f32` arithmetic (within [`E1_F32_MAX_REL_ERROR`]):
+/// the steps of [`e1_f64`] with 12 series terms and 9 Taylor terms; above 10 through [`e1_f64`].
+pub fn e1_f32(x: f32) -> f32 {
+    e1_with_exp_f32(x, libm::expf(-x))
 }
 
-/// The series branch of [`e1_with_exp`] for the lanes of `active` (x ≤ 1; other lanes are
-/// evaluated at 1 and discarded by the caller).
-fn e1_series4(active: [u64; 4], x: F64x4) -> F64x4 {
-    let x = blend(active, x, F64x4::c(1.0));
-    F64x4::c(-EULER_GAMMA) - super::lanes::ln4_of(x) + ein(x)
+/// [`e1_f32`] given `ex = e^(−x)` (used for 1 < x ≤ 10 only).
+#[inline]
+pub fn e1_with_exp_f32(x: f32, ex: f32) -> f32 {
+    if x.is_nan() || x <= 0.0 {
+        return if x == 0.0 { f32::INFINITY } else { f32::NAN };
+    }
+    if x <= E1_SERIES_MAX as f32 {
+        e1_series(libm::logf(x), ein12(x))
+    } else if x <= E1_TAYLOR_MAX as f32 {
+        let i = patch_index(x as f64);
+        ex * taylor_h(
+            &E1_TAYLOR[i],
+            E1_TAYLOR_TERMS_F32,
+            x - patch_centre(i) as f32,
+        )
+    } else {
+        e1_f64(x as f64) as f32
+    }
 }
 
-/// `e^x·E1(x)` on each lane's Taylor patch (1 < x ≤ 10; other lanes use a valid patch and are
-/// discarded by the caller).
-fn e1_taylor4(x: F64x4) -> F64x4 {
-    let patch = |v: f64| -> usize {
-        let v = v.clamp(1.0, E1_TAYLOR_MAX);
-        if v <= 4.0 {
-            libm::floor((v - 1.0) * 4.0) as usize
-        } else {
-            12 + libm::floor((v - 4.0) * 2.0) as usize
-        }
-        .min(E1_PATCHES - 1)
-    };
-    let i = [patch(x.0[0]), patch(x.0[1]), patch(x.0[2]), patch(x.0[3])];
-    let d = x - F64x4([
-        patch_centre(i[0]),
-        patch_centre(i[1]),
-        patch_centre(i[2]),
-        patch_centre(i[3]),
-    ]);
-    let rows = [
-        &E1_TAYLOR[i[0]],
-        &E1_TAYLOR[i[1]],
-        &E1_TAYLOR[i[2]],
-        &E1_TAYLOR[i[3]],
-    ];
-    let mut h = F64x4::c(0.0);
-    for n in (0..E1_TAYLOR_TERMS).rev() {
-        h = h * d + F64x4([rows[0][n], rows[1][n], rows[2][n], rows[3][n]]);
+/// The Taylor patch of `x` in (1, 10] (arguments outside are clamped into that range).
+#[inline(always)]
+pub(in crate::real) fn patch_index(x: f64) -> usize {
+    let x = x.clamp(E1_SERIES_MAX, E1_TAYLOR_MAX);
+    if x <= 4.0 {
+        libm::floor((x - 1.0) * 4.0) as usize
+    } else {
+        12 + libm::floor((x - 4.0) * 2.0) as usize
     }
-    h
+    .min(E1_PATCHES - 1)
 }
 
-/// The continued fraction's numerator and denominator `(A, B)`, `e^x·E1(x) = A/B`, for the lanes
-/// of `active` (x > 10), each to its own depth.
-fn e1_cf4(active: [u64; 4], x: F64x4) -> (F64x4, F64x4) {
-    let c = F64x4::c;
-    let x = blend(active, x, c(2.0 * E1_TAYLOR_MAX));
-    let depth = x.0.map(|v| 8 + libm::ceil(110.0 / v) as usize);
-    let (mut a_prev, mut a) = (c(1.0), c(0.0));
-    let (mut b_prev, mut b) = (c(0.0), c(1.0));
-    let max_depth = depth.iter().copied().max().unwrap_or(0);
-    for j in 1..=max_depth {
-        let jm1 = (j - 1) as f64;
-        let aj = c(if j == 1 { 1.0 } else { -jm1 * jm1 });
-        let bj = x + c((2 * j - 1) as f64);
-        let a_next = bj * a + aj * a_prev;
-        let b_next = bj * b + aj * b_prev;
-        let go = depth.map(|dl| if j <= dl { u64::MAX } else { 0 });
-        a_prev = blend(go, a, a_prev);
-        a = blend(go, a_next, a);
-        b_prev = blend(go, b, b_prev);
-        b = blend(go, b_next, b);
-    }
-    (a, b)
+/// Levels of the continued fraction for 1e-16 at `x` > 10.
+#[inline(always)]
+pub(in crate::real) fn cf_depth(x: f64) -> usize {
+    8 + libm::ceil(110.0 / x) as usize
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn four_lanes_match_the_scalar_bit_for_bit() {
-        // Lanes in one regime, lanes across regimes, and each branch boundary.
-        let groups: [[f64; 4]; 8] = [
-            [1e-12, 0.01, 0.5, 0.999],
-            [1.0, 1.3, 2.6, 3.999],
-            [4.0, 4.6, 6.1, 9.99],
-            [10.0, 10.01, 15.0, 80.0],
-            [0.2, 3.3, 12.0, 1e-6],
-            [0.999, 1.0001, 9.9999, 10.0001],
-            [2e-16, 0.7, 30.0, 5.5],
-            [700.0, 0.05, 1.75, 8.0],
-        ];
-        for g in groups {
-            let x = F64x4(g);
-            let ex = x.map(|v| libm::exp(-v));
-            let got = e1_with_exp4(x, ex);
-            for (i, &xi) in g.iter().enumerate() {
-                let want = e1_with_exp(xi, libm::exp(-xi));
-                assert_eq!(got.0[i].to_bits(), want.to_bits(), "x {xi}");
-            }
-        }
-        let bad = e1_with_exp4(F64x4([0.0, -1.0, 1.0, f64::NAN]), F64x4::c(1.0));
-        assert!(bad.0[0].is_infinite() && bad.0[1].is_nan() && bad.0[3].is_nan());
-    }
 
     /// E1 at 40 digits (mpmath), rounded to 20.
     #[allow(clippy::excessive_precision)]
@@ -306,6 +272,27 @@ mod tests {
             assert!(rel < E1_MAX_REL_ERROR, "x {x}: rel {rel:e}");
         }
         assert!(e1_f64(0.0).is_infinite() && e1_f64(-1.0).is_nan() && e1_f64(f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn f32_matches_40_digit_vectors() {
+        for (x, want) in E1_VECTORS {
+            let x32 = x as f32;
+            // The vector's argument rounded to f32: E1 there, to first order.
+            let want = want * (1.0 - (x32 as f64 - x) * libm::exp(-x) / x / want);
+            let rel = ((e1_f32(x32) as f64 - want) / want).abs();
+            assert!(rel < E1_F32_MAX_REL_ERROR, "x {x}: rel {rel:e}");
+        }
+        // Densely against the f64 function (itself within 2e-15).
+        let mut worst = 0.0f64;
+        for i in 0..200_000 {
+            let x = 1e-8 * libm::pow(80.0 / 1e-8, i as f64 / 199_999.0);
+            let x32 = x as f32;
+            let want = e1_f64(x32 as f64);
+            worst = worst.max(((e1_f32(x32) as f64 - want) / want).abs());
+        }
+        assert!(worst < E1_F32_MAX_REL_ERROR, "worst {worst:e}");
+        assert!(e1_f32(0.0).is_infinite() && e1_f32(-1.0).is_nan() && e1_f32(f32::NAN).is_nan());
     }
 
     #[test]

@@ -11,19 +11,66 @@
 //! Branches in the physics (numerical guards, series switches) look at [`Real::value`], the primal
 //! value, so all three scalars take the same branch for the same input.
 //!
-//! [`F64x4`] and [`F32x4`] ([`lanes`]) are `Real`s too: four independent values computed together,
-//! which is how INFORM evaluates four wavelengths per call. Code that may run on lanes branches
-//! through [`Real::select`], where each lane takes its own branch.
+//! The lane types of [`lanes`] ([`F64x4`], [`F64x8`], [`F32x8`], [`F32x16`]) are `Real`s too:
+//! several independent values computed together, which is how INFORM evaluates several
+//! wavelengths per call. Code that may run on lanes branches through [`Real::select`], where each
+//! lane takes its own branch.
 
 mod dual;
 mod e1;
 pub mod lanes;
+pub mod sin_cos;
+pub mod sqrt;
 
 pub use dual::Dual;
-pub use e1::{e1_f64, e1_with_exp, E1_MAX_REL_ERROR};
-pub use lanes::{DualScalar, F32x4, F64x4, F64x8, Lanes};
+pub use e1::{
+    e1_f32, e1_f64, e1_with_exp, e1_with_exp_f32, E1_F32_MAX_REL_ERROR, E1_MAX_REL_ERROR,
+};
+pub use lanes::{DualScalar, F32x16, F32x8, F64x4, F64x8, Lanes};
 
 use core::fmt::Debug;
+
+/// A comparison of a value with a constant: what [`Real::mask`] and [`Real::select`] test (for
+/// lanes: every lane, with one vector comparison). Scalars compare their `f64` value; lanes of
+/// `f32` compare with constants chosen so that the answer is the same.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Cmp {
+    /// `v < c`.
+    Lt(f64),
+    /// `v ≤ c`.
+    Le(f64),
+    /// `v > c`.
+    Gt(f64),
+    /// `v ≥ c`.
+    Ge(f64),
+    /// `v = c`.
+    Eq(f64),
+    /// `v ≠ c` (true for NaN).
+    Ne(f64),
+    /// `|v| > c`.
+    AbsGt(f64),
+}
+
+impl Cmp {
+    /// Whether `v` passes.
+    ///
+    /// ```
+    /// use magic_core::real::Cmp;
+    /// assert!(Cmp::AbsGt(1e-3).test(-0.5) && !Cmp::Gt(0.0).test(f64::NAN));
+    /// ```
+    #[inline(always)]
+    pub fn test(self, v: f64) -> bool {
+        match self {
+            Cmp::Lt(c) => v < c,
+            Cmp::Le(c) => v <= c,
+            Cmp::Gt(c) => v > c,
+            Cmp::Ge(c) => v >= c,
+            Cmp::Eq(c) => v == c,
+            Cmp::Ne(c) => v != c,
+            Cmp::AbsGt(c) => libm::fabs(v) > c,
+        }
+    }
+}
 use core::ops::{Add, AddAssign, Div, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
 /// A real scalar: `f32`, `f64` or a forward-mode [`Dual`] number.
@@ -46,9 +93,13 @@ pub trait Real:
     /// for lanes.
     type Plain: Real;
     /// Several values of this type computed together: on targets with SIMD (x86-64, AArch64)
-    /// [`F64x8`] for `f64`, [`F32x4`] for `f32`, duals on [`F64x4`] for duals on `f64`; elsewhere
+    /// [`F64x8`] for `f64`, [`F32x16`] for `f32`, duals on [`F64x4`] for duals on `f64`; elsewhere
     /// (the Cortex-M4F) each type is its own single lane, as lanes are for themselves.
     type Lanes: Lanes<Self>;
+
+    /// Which values pass a comparison ([`Real::mask`]): a `bool` for scalars and duals on them,
+    /// one all-ones or all-zeros pattern per lane for lanes.
+    type Mask: Copy;
 
     /// A constant (derivatives zero).
     fn c(v: f64) -> Self;
@@ -57,32 +108,38 @@ pub trait Real:
     fn scale(self, k: Self::Plain) -> Self;
     /// A plain value as a constant of this type.
     fn from_plain(k: Self::Plain) -> Self;
-    /// `a()` where `pred(value)` holds, else `b()` — by the primal value for scalars and duals
+    /// Where `cmp` holds for the primal value (lane by lane for lanes).
+    fn mask(self, cmp: Cmp) -> Self::Mask;
+    /// `a` where `m` is set, else `b` (lane by lane for lanes; derivatives follow their value).
+    fn blend(m: Self::Mask, a: Self, b: Self) -> Self;
+    /// Whether every lane of `m` is set (a scalar's mask: whether it is set).
+    fn mask_all(m: Self::Mask) -> bool;
+    /// Whether some lane of `m` is set.
+    fn mask_any(m: Self::Mask) -> bool;
+    /// `a()` where `cmp` holds for the value, else `b()` — by the primal value for scalars and duals
     /// (only the chosen branch is evaluated), lane by lane for lanes (a branch is evaluated when
-    /// some lane takes it). Physics that may run on lanes branches this way rather than on
-    /// [`Real::value`].
+    /// some lane takes it, and the lanes are blended by one mask). Physics that may run on lanes
+    /// branches this way rather than on [`Real::value`].
     #[inline(always)]
-    fn select(
-        self,
-        pred: impl Fn(f64) -> bool,
-        a: impl FnOnce() -> Self,
-        b: impl FnOnce() -> Self,
-    ) -> Self {
-        if pred(self.value()) {
+    fn select(self, cmp: Cmp, a: impl FnOnce() -> Self, b: impl FnOnce() -> Self) -> Self {
+        let m = self.mask(cmp);
+        if Self::mask_all(m) {
             a()
-        } else {
+        } else if !Self::mask_any(m) {
             b()
+        } else {
+            Self::blend(m, a(), b())
         }
     }
-    /// Whether `pred` holds for the value (for lanes: for every lane).
-    #[inline]
-    fn all(self, pred: impl Fn(f64) -> bool) -> bool {
-        pred(self.value())
+    /// Whether `cmp` holds for the value (for lanes: for every lane).
+    #[inline(always)]
+    fn all(self, cmp: Cmp) -> bool {
+        Self::mask_all(self.mask(cmp))
     }
-    /// Whether `pred` holds for the value (for lanes: for some lane).
-    #[inline]
-    fn any(self, pred: impl Fn(f64) -> bool) -> bool {
-        pred(self.value())
+    /// Whether `cmp` holds for the value (for lanes: for some lane).
+    #[inline(always)]
+    fn any(self, cmp: Cmp) -> bool {
+        Self::mask_any(self.mask(cmp))
     }
     /// The primal value as `f64` (for branching and reporting).
     fn value(self) -> f64;
@@ -157,9 +214,37 @@ pub trait Real:
     }
 }
 
+/// The mask items of [`Real`] for a plain scalar: a `bool`.
+macro_rules! scalar_mask {
+    () => {
+        #[inline(always)]
+        fn mask(self, cmp: Cmp) -> bool {
+            cmp.test(self.value())
+        }
+        #[inline(always)]
+        fn blend(m: bool, a: Self, b: Self) -> Self {
+            if m {
+                a
+            } else {
+                b
+            }
+        }
+        #[inline(always)]
+        fn mask_all(m: bool) -> bool {
+            m
+        }
+        #[inline(always)]
+        fn mask_any(m: bool) -> bool {
+            m
+        }
+    };
+}
+
 impl Real for f64 {
     type Plain = f64;
     type Lanes = lanes::LanesF64;
+    type Mask = bool;
+    scalar_mask!();
     #[inline]
     fn c(v: f64) -> Self {
         v
@@ -246,6 +331,8 @@ impl Real for f64 {
 impl Real for f32 {
     type Plain = f32;
     type Lanes = lanes::LanesF32;
+    type Mask = bool;
+    scalar_mask!();
     #[inline]
     fn c(v: f64) -> Self {
         v as f32
@@ -316,7 +403,12 @@ impl Real for f32 {
     }
     #[inline]
     fn e1(self) -> Self {
-        e1_f64(self as f64) as f32
+        e1_f32(self)
+    }
+    #[inline]
+    fn e1_and_exp(self) -> (Self, Self) {
+        let ex = libm::expf(-self);
+        (e1_with_exp_f32(self, ex), ex)
     }
     #[inline]
     fn is_finite(self) -> bool {

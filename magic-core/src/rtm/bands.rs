@@ -25,6 +25,7 @@ use super::model::{
 };
 use super::prospect::{CoefRow, Coefficients};
 use super::sail::LITAB_DEG;
+use super::sensor::BandSums;
 use crate::quant::LeF32;
 use crate::real::{Dual, Lanes, Real};
 use crate::Error;
@@ -48,6 +49,17 @@ pub trait Values: Copy {
     }
     /// Value `i` (0 past the end; lengths are checked by [`Packed::new`]).
     fn at(&self, i: usize) -> f64;
+    /// Whether every value is finite (the first that is not: found with [`Values::at`]).
+    fn all_finite(&self) -> bool {
+        (0..self.len()).all(|i| self.at(i).is_finite())
+    }
+    /// Values `start..start + out.len()` into `out` (0 past the end).
+    #[inline]
+    fn copy_to(&self, start: usize, out: &mut [f64]) {
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = self.at(start + i);
+        }
+    }
     /// Values `start..start + len` as an `f64` slice, when they are stored as one (not for
     /// `f32` bytes).
     #[inline]
@@ -69,6 +81,20 @@ impl Values for &[f64] {
     fn run(&self, start: usize, len: usize) -> Option<&[f64]> {
         self.get(start..start + len)
     }
+    fn all_finite(&self) -> bool {
+        // (A fold rather than `all`: no early exit, so the compiler checks many at once.)
+        self.iter().fold(true, |ok, x| ok & x.is_finite())
+    }
+    #[inline]
+    fn copy_to(&self, start: usize, out: &mut [f64]) {
+        match self.get(start..start + out.len()) {
+            Some(v) => out.copy_from_slice(v),
+            None => out
+                .iter_mut()
+                .enumerate()
+                .for_each(|(i, o)| *o = self.at(start + i)),
+        }
+    }
 }
 
 impl Values for LeF32<'_> {
@@ -80,6 +106,27 @@ impl Values for LeF32<'_> {
     fn at(&self, i: usize) -> f64 {
         self.get(i) as f64
     }
+    #[inline]
+    fn copy_to(&self, start: usize, out: &mut [f64]) {
+        match self.0.get(4 * start..4 * (start + out.len())) {
+            Some(bytes) => {
+                for (o, b) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+                    *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64;
+                }
+            }
+            None => out
+                .iter_mut()
+                .enumerate()
+                .for_each(|(i, o)| *o = self.at(start + i)),
+        }
+    }
+    fn all_finite(&self) -> bool {
+        // An f32 is finite when its exponent bits are not all set; checked on the bytes.
+        self.0.chunks_exact(4).fold(true, |ok, b| {
+            let bits = u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            ok & (bits & 0x7f80_0000 != 0x7f80_0000)
+        })
+    }
 }
 
 /// INFORM restricted to the rows of a set of observed bands.
@@ -90,6 +137,44 @@ pub struct Packed<V> {
     lidf_beta: V,
     n_rows: usize,
     n_bands: usize,
+    /// Per band: first and last row with weight (`(1, 0)` for a band without).
+    ranges: [(usize, usize); N_BANDS],
+}
+
+/// Most rows read together (the widest lanes: 16 `f32`).
+const MAX_LANES: usize = 16;
+
+/// Per band: the first and last of `n_rows` rows whose weight is not zero (`(1, 0)` for a band
+/// without), for the `n_rows × n_bands` weights (row-major). The weights are read a block of rows
+/// at a time; a band's rows are looked for only in the blocks where it has weight.
+fn band_ranges<V: Values>(weights: V, n_rows: usize, n_bands: usize) -> [(usize, usize); N_BANDS] {
+    const BLOCK: usize = 16;
+    let mut ranges = [(1usize, 0usize); N_BANDS];
+    let mut buf = [0.0; BLOCK * N_BANDS];
+    for r0 in (0..n_rows).step_by(BLOCK) {
+        let rows = BLOCK.min(n_rows - r0);
+        let block = &mut buf[..rows * n_bands];
+        weights.copy_to(r0 * n_bands, block);
+        // Per band: the bits of its weights in the block, sign left out (−0 is no weight).
+        let mut any = [0u64; N_BANDS];
+        for row in block.chunks_exact(n_bands) {
+            for (a, w) in any.iter_mut().zip(row) {
+                *a |= w.to_bits() << 1;
+            }
+        }
+        let block = &*block;
+        for (b, r) in ranges.iter_mut().enumerate().take(n_bands) {
+            if any[b] == 0 {
+                continue;
+            }
+            let nonzero = |row: &usize| block[row * n_bands + b] != 0.0;
+            if r.0 > r.1 {
+                r.0 = r0 + (0..rows).find(nonzero).unwrap_or(0);
+            }
+            r.1 = r0 + (0..rows).rev().find(nonzero).unwrap_or(0);
+        }
+    }
+    ranges
 }
 
 /// Zero-length stand-ins for the spectral tables when only the wavelength-independent part of
@@ -136,16 +221,19 @@ impl<V: Values> Packed<V> {
             ("packed band weights", weights),
             ("lidf beta table", lidf_beta),
         ] {
-            if let Some(index) = (0..v.len()).find(|&i| !v.at(i).is_finite()) {
+            if !v.all_finite() {
+                let index = (0..v.len()).find(|&i| !v.at(i).is_finite()).unwrap_or(0);
                 return Err(Error::NonFinite { what, index });
             }
         }
+        let ranges = band_ranges(weights, n_rows, n_bands);
         Ok(Packed {
             spectral,
             weights,
             lidf_beta,
             n_rows,
             n_bands,
+            ranges,
         })
     }
 
@@ -190,17 +278,29 @@ impl<V: Values> Packed<V> {
 
     /// Rows `i0, i0 + 1, …` as lanes of `W`, row `i0 + j` in lane `j`; lanes past the last row
     /// repeat it.
-    #[inline]
+    #[inline(always)]
     fn rows<S: Real, W: Lanes<S>>(&self, i0: usize) -> SpectralRow<W::Plain> {
-        match self.spectral.run(i0 * ROW_WIDTH, W::WIDTH * ROW_WIDTH) {
-            Some(block) => SpectralRow::from_fn(|k| W::plain_from_fn(|j| block[j * ROW_WIDTH + k])),
-            None => {
-                let last = self.n_rows - 1;
-                SpectralRow::from_fn(|k| {
-                    W::plain_from_fn(|j| self.spectral.at((i0 + j).min(last) * ROW_WIDTH + k))
-                })
-            }
+        if let Some(block) = self.spectral.run(i0 * ROW_WIDTH, W::WIDTH * ROW_WIDTH) {
+            return SpectralRow::from_fn(|k| W::plain_from_fn(|j| block[j * ROW_WIDTH + k]));
         }
+        let last = self.n_rows - 1;
+        if W::WIDTH == 1 {
+            return SpectralRow::from_fn(|k| {
+                W::plain_from_fn(|_| self.spectral.at(i0.min(last) * ROW_WIDTH + k))
+            });
+        }
+        // Several rows: read them at once (f32 bytes decoded in one pass); lanes past the last
+        // row repeat it.
+        let mut buf = [0.0; MAX_LANES * ROW_WIDTH];
+        let i0 = i0.min(last);
+        let n = (self.n_rows - i0).min(W::WIDTH).min(MAX_LANES);
+        let (rows, rest) = buf.split_at_mut(n * ROW_WIDTH);
+        self.spectral.copy_to(i0 * ROW_WIDTH, rows);
+        let last_row = &rows[(n - 1) * ROW_WIDTH..];
+        for r in rest.chunks_exact_mut(ROW_WIDTH) {
+            r.copy_from_slice(last_row);
+        }
+        SpectralRow::from_fn(|k| W::plain_from_fn(|j| buf[j * ROW_WIDTH + k]))
     }
 
     /// Weight of row `i` in band `b`.
@@ -253,22 +353,14 @@ impl<V: Values> Packed<V> {
         out: &mut [R],
     ) -> Result<(), Error> {
         self.check_out(out)?;
-        let scene = self.scene(x, geometry)?;
-        out.iter_mut().for_each(|o| *o = R::zero());
-        let lanes = scene.lanes();
-        let width = <R::Lanes as Lanes<R>>::WIDTH;
-        for i0 in (0..self.n_rows).step_by(width) {
-            let r = lanes.wavelength(&self.rows::<R, R::Lanes>(i0)).r_forest;
-            for (j, i) in (i0..self.n_rows.min(i0 + width)).enumerate() {
-                let rj = r.lane(j);
-                for (b, o) in out.iter_mut().enumerate() {
-                    let w = self.weight(i, b);
-                    if w != 0.0 {
-                        *o += rj.scale(<R::Plain as Real>::c(w));
-                    }
-                }
-            }
+        let scene = self.scene(x, geometry)?.lanes();
+        let mut sums = BandSums::<R::Lanes>::new(&self.ranges[..self.n_bands]);
+        let last = self.n_rows - 1;
+        for i0 in (0..self.n_rows).step_by(<R::Lanes as Lanes<R>>::WIDTH) {
+            let r = scene.wavelength(&self.rows::<R, R::Lanes>(i0)).r_forest;
+            sums.add(i0, last, r, |i, b| self.weight(i, b));
         }
+        sums.finish(out);
         Ok(())
     }
 
@@ -307,23 +399,17 @@ impl<V: Values> Packed<V> {
         self.check_out(out)?;
         self.check_out(jac)?;
         let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
-        out.iter_mut().for_each(|o| *o = 0.0);
-        jac.iter_mut().for_each(|r| *r = [0.0; N_LEARNED]);
-        let width = <JacobianLanes as Lanes<Dual<N_LEARNED>>>::WIDTH;
-        for i0 in (0..self.n_rows).step_by(width) {
+        let mut sums = BandSums::<JacobianLanes>::new(&self.ranges[..self.n_bands]);
+        let last = self.n_rows - 1;
+        for i0 in (0..self.n_rows).step_by(<JacobianLanes as Lanes<Dual<N_LEARNED>>>::WIDTH) {
             let r = lj.wavelengths(&self.rows::<Dual<N_LEARNED>, JacobianLanes>(i0));
-            for (j, i) in (i0..self.n_rows.min(i0 + width)).enumerate() {
-                let rj: Dual<N_LEARNED> = r.lane(j);
-                for b in 0..self.n_bands {
-                    let w = self.weight(i, b);
-                    if w != 0.0 {
-                        out[b] += w * rj.v;
-                        for (jb, dj) in jac[b].iter_mut().zip(&rj.d) {
-                            *jb += w * dj;
-                        }
-                    }
-                }
-            }
+            sums.add::<Dual<N_LEARNED>>(i0, last, r, |i, b| self.weight(i, b));
+        }
+        let mut bands = [Dual::<N_LEARNED>::constant(0.0); N_BANDS];
+        sums.finish(&mut bands[..self.n_bands]);
+        for ((o, j), d) in out.iter_mut().zip(jac.iter_mut()).zip(&bands) {
+            *o = d.v;
+            *j = d.d;
         }
         Ok(())
     }

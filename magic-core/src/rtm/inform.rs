@@ -51,8 +51,9 @@
 
 use super::prospect::{leaf_optics, CoefRow, Leaf, LeafOptics};
 use super::sail::{
-    directional, extinction, irradiance_weights, layer, medium, sail_view, skyl, slab, sqrt0,
-    tan_distance, Extinction, HotspotRule, Layer, Lidf, SailOutput, SunView,
+    directional, directional_sun, extinction, irradiance_weights, layer, medium, sail_sun,
+    sail_view, skyl, slab, sqrt0, tan_distance, view_terms, Extinction, HotspotRule, Layer, Lidf,
+    SailOutput, SunView,
 };
 use crate::real::{Lanes, Real};
 use core::f64::consts::PI;
@@ -415,9 +416,12 @@ impl<R: Real> Scene<R> {
         // The crown layer (single-tree LAI) on the understory: its transmittances.
         let (t_s, t_o) = match self.geometry {
             Geometry::Reference => {
-                let s = sail_view(&self.crown_s, &md, &dir, &slab_c, r_u);
-                let dir_o = directional(&self.ext_o, &md);
-                let o = sail_view(&self.crown_o, &md, &dir_o, &slab_c, r_u);
+                // The two calls differ only in the sun direction (the reference's view call
+                // keeps the view angles: same `ko`, `bf` and `too`), so they share the view terms.
+                let view = view_terms(&self.crown_s, &dir, &slab_c, r_u);
+                let s = sail_sun::<R, false>(&self.crown_s, &md, &dir, &slab_c, r_u, &view);
+                let dir_o = directional_sun(&self.ext_o, &md, &dir);
+                let o = sail_sun::<R, false>(&self.crown_o, &md, &dir_o, &slab_c, r_u, &view);
                 let [(s_dir, s_dif), (o_dir, o_dif)] = self.crown_weights;
                 (
                     s.rsot * s_dir + s.rdot * s_dif,
@@ -532,6 +536,65 @@ mod tests {
         };
         let (ts, to) = crown_transmittances(&c, 0.2, 0.2);
         assert!(ts > 0.0 && ts < 1.0 && to > 0.0 && to < 1.0);
+    }
+
+    /// The reference's view-transmittance call keeps the view direction, so it shares the view
+    /// terms of the sun-transmittance call: same `ko`, `bf`, `too`, and the shared evaluation
+    /// equals a separate 4SAIL call bit for bit.
+    #[test]
+    fn reference_view_call_shares_the_view_terms() {
+        use crate::rtm::prospect::Leaf;
+        use crate::rtm::sail::{sail_view, CampbellBins};
+        let leaf = Leaf::<f64> {
+            n: 1.6,
+            cab: 40.0,
+            car: 10.0,
+            anth: 2.0,
+            cbrown: 0.25,
+            cw: 0.01,
+            cm: 0.01,
+        };
+        let row = SpectralRow::from_fn(|k| {
+            [
+                1.45, 0.02, 0.01, 0.005, 0.1, 0.5, 20.0, 0.96, 0.9, 0.3, 0.1, 1.0, 0.5,
+            ][k]
+        });
+        for (tts, tto, psi, ala) in [
+            (30.0, 0.0, 0.0, 40.0),
+            (55.0, 10.0, 120.0, 70.0),
+            (20.0, 5.0, 10.0, 25.0),
+        ] {
+            let lidf = Lidf::campbell(ala, CampbellBins::Reference13).unwrap();
+            let stand = Stand {
+                leaf,
+                lai: 3.0,
+                lai_u: 0.5,
+                hspot: 0.01,
+                psoil: 0.8,
+                tts,
+                tto,
+                psi,
+                cd: 4.0,
+                sd: 500.0,
+                h: 17.0,
+            };
+            let sc = Scene::new(&stand, &lidf, Geometry::Reference);
+            assert_eq!(sc.ext_o.ko.to_bits(), sc.ext.ko.to_bits());
+            assert_eq!(sc.ext_o.bf.to_bits(), sc.ext.bf.to_bits());
+            assert_eq!(sc.crown_o.too.to_bits(), sc.crown_s.too.to_bits());
+            let t = sc.wavelength(&row);
+            let md = medium(sc.ext.bf, t.leaf);
+            let dir_o = directional(&sc.ext_o, &md);
+            let o = sail_view(
+                &sc.crown_o,
+                &md,
+                &dir_o,
+                &slab(&md, sc.crown_o.lai),
+                t.r_understory,
+            );
+            let [_, (o_dir, o_dif)] = sc.crown_weights;
+            assert_eq!(t.t_o.to_bits(), (o.rsot * o_dir + o.rdot * o_dif).to_bits());
+        }
     }
 
     #[test]

@@ -16,6 +16,7 @@
 pub mod bands;
 pub mod inform;
 pub mod model;
+pub mod prosail;
 pub mod prospect;
 pub mod sail;
 pub mod sensor;

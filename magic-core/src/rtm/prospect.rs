@@ -19,7 +19,7 @@
 //! part of the model): a plate absorption `k = 0` is replaced by the f64 machine epsilon, and the
 //! denominator `va·(β − r90)` of `vb` is floored at 1e-14.
 
-use crate::real::Real;
+use crate::real::{Cmp, Real};
 
 /// One row of the PROSPECT-D coefficient table (one wavelength), in `f64` as read from the
 /// table, or in another plain type (`f32`, or lanes holding one wavelength each).
@@ -223,7 +223,7 @@ fn plate_interior<R: Real>(c: &CoefRow<R::Plain>, leaf: &Leaf<R>) -> R {
         + leaf.cm.scale(c.k_cm))
         * (R::one() / leaf.n);
     // Reference guard: E1(0) is infinite; the reference substitutes the f64 epsilon.
-    let k = k.select(|v| v == 0.0, || R::c(f64::EPSILON), || k);
+    let k = k.select(Cmp::Eq(0.0), || R::c(f64::EPSILON), || k);
     let (e1, ek) = k.e1_and_exp();
     (R::one() - k) * ek + k * k * e1
 }

@@ -36,7 +36,7 @@
 //! (`tsstoo = tss·too`).
 
 use super::prospect::LeafOptics;
-use crate::real::Real;
+use crate::real::{Cmp, Real};
 use crate::Error;
 use core::f64::consts::{FRAC_PI_2, PI};
 
@@ -314,7 +314,7 @@ impl<R: Copy> Extinction<R> {
 /// at the hotspot and at exact zeros.
 #[inline]
 pub(crate) fn sqrt0<R: Real>(x: R) -> R {
-    x.select(|v| v > 0.0, || x.sqrt(), R::zero)
+    x.select(Cmp::Gt(0.0), || x.sqrt(), R::zero)
 }
 
 /// `sqrt(tan²a + tan²b − 2 tan a tan b cos ψ)` given `tan a`, `tan b` and ψ, evaluated as
@@ -616,7 +616,7 @@ pub struct Directional<R> {
 /// `1/x`, or 0 where `x` is exactly 0.
 #[inline]
 fn inv_or_zero<R: Real>(x: R) -> R {
-    x.select(|v| v != 0.0, || R::one() / x, R::zero)
+    x.select(Cmp::Ne(0.0), || R::one() / x, R::zero)
 }
 
 /// The directional terms of medium `md` in geometry `e`.
@@ -624,30 +624,52 @@ fn inv_or_zero<R: Real>(x: R) -> R {
 pub fn directional<R: Real>(e: &Extinction<R>, md: &Medium<R>) -> Directional<R> {
     let half = R::c(0.5);
     let (rho, tau, m, rinf) = (md.rho, md.tau, md.m, md.rinf);
-    let sdb = half * (e.ks + e.bf);
-    let sdf = half * (e.ks - e.bf);
     let dob = half * (e.ko + e.bf);
     let dof = half * (e.ko - e.bf);
-    let sb = sdb * rho + sdf * tau;
-    let sf = sdf * rho + sdb * tau;
     let vb = dob * rho + dof * tau;
     let vf = dof * rho + dob * tau;
-    let ks_m = e.ks - m;
-    let ko_m = e.ko - m;
-    let (inv_ks_m, inv_ks_p) = inv_pair(e.ks, m);
     let (inv_ko_m, inv_ko_p) = inv_pair(e.ko, m);
+    let zero = R::zero();
+    // The view terms; the sun terms follow.
+    let view = Directional {
+        v_down: vf + vb * rinf,
+        v_up: vf * rinf + vb,
+        ko_m: e.ko - m,
+        inv_ko_m,
+        inv_ko_p,
+        s_down: zero,
+        s_up: zero,
+        w: zero,
+        ks_m: zero,
+        inv_ks_m: zero,
+        inv_ks_p: zero,
+    };
+    directional_sun(e, md, &view)
+}
+
+/// The directional terms of medium `md` in geometry `e` whose view direction is that of `view`
+/// (the same `ko` and `bf`): the sun terms are computed, the view terms taken from `view`.
+#[inline]
+pub fn directional_sun<R: Real>(
+    e: &Extinction<R>,
+    md: &Medium<R>,
+    view: &Directional<R>,
+) -> Directional<R> {
+    let half = R::c(0.5);
+    let (rho, tau, m, rinf) = (md.rho, md.tau, md.m, md.rinf);
+    let sdb = half * (e.ks + e.bf);
+    let sdf = half * (e.ks - e.bf);
+    let sb = sdb * rho + sdf * tau;
+    let sf = sdf * rho + sdb * tau;
+    let (inv_ks_m, inv_ks_p) = inv_pair(e.ks, m);
     Directional {
         s_down: sf + sb * rinf,
         s_up: sf * rinf + sb,
-        v_down: vf + vb * rinf,
-        v_up: vf * rinf + vb,
         w: e.sob * rho + e.sof * tau,
-        ks_m,
-        ko_m,
+        ks_m: e.ks - m,
         inv_ks_m,
-        inv_ko_m,
         inv_ks_p,
-        inv_ko_p,
+        ..*view
     }
 }
 
@@ -657,7 +679,7 @@ pub fn directional<R: Real>(e: &Extinction<R>, md: &Medium<R>) -> Directional<R>
 fn inv_pair<R: Real>(k: R, m: R) -> (R, R) {
     let (d, s) = (k - m, k + m);
     let q = inv_or_zero(d * s);
-    (s * q, d.select(|v| v != 0.0, || d * q, || R::one() / s))
+    (s * q, d.select(Cmp::Ne(0.0), || d * q, || R::one() / s))
 }
 
 /// Per wavelength diffuse terms of a layer of the medium with a given LAI, shared by every
@@ -724,7 +746,7 @@ pub struct SailOutput<R> {
 fn jfunc1<R: Real>(k_m: R, inv_k_m: R, t: R, emt: R, ekt: R) -> R {
     let del = k_m * t;
     del.select(
-        |d| libm::fabs(d) > J1_SERIES_THRESHOLD,
+        Cmp::AbsGt(J1_SERIES_THRESHOLD),
         || (emt - ekt) * inv_k_m,
         || R::c(0.5) * t * (ekt + emt) * (R::one() - del * del / R::c(12.0)),
     )
@@ -763,13 +785,58 @@ pub(crate) fn sail_view<R: Real>(
     sail_core::<R, false>(l, md, d, s, soil)
 }
 
+/// The view-direction terms of 4SAIL for one layer over a background: everything that does not
+/// involve the sun direction, so calls that differ only in the sun direction (the reference's two
+/// crown "transmittance" calls) share it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ViewTerms<R> {
+    j1ko: R,
+    tdo: R,
+    rdo: R,
+    inv_dn: R,
+    rdot: R,
+    soil_tdd_dn: R,
+}
+
+/// The [`ViewTerms`] of layer `l` of medium `md` (directional terms `d`, diffuse terms `s`) over
+/// background reflectance `soil`.
 #[inline]
-fn sail_core<R: Real, const HEMI: bool>(
+pub(crate) fn view_terms<R: Real>(
+    l: &Layer<R>,
+    d: &Directional<R>,
+    s: &Slab<R>,
+    soil: R,
+) -> ViewTerms<R> {
+    let one = R::one();
+    let (lai, too) = (l.lai, l.too);
+    let j1ko = jfunc1(d.ko_m, d.inv_ko_m, lai, s.e1, too);
+    let j2ko = (one - too * s.e1) * d.inv_ko_p;
+    let pv = d.v_down * j1ko;
+    let qv = d.v_up * j2ko;
+    let tdo = (pv - s.re * qv) * s.inv_denom;
+    let rdo = (qv - s.re * pv) * s.inv_denom;
+    let inv_dn = one / (one - soil * s.rdd);
+    let soil_tdd_dn = soil * s.tdd * inv_dn;
+    ViewTerms {
+        j1ko,
+        tdo,
+        rdo,
+        inv_dn,
+        rdot: rdo + (tdo + too) * soil_tdd_dn,
+        soil_tdd_dn,
+    }
+}
+
+/// 4SAIL at one wavelength from its view terms `v` (of the same layer LAI, view direction,
+/// medium, slab and background): the sun-direction terms and the outputs.
+#[inline]
+pub(crate) fn sail_sun<R: Real, const HEMI: bool>(
     l: &Layer<R>,
     md: &Medium<R>,
     d: &Directional<R>,
     s: &Slab<R>,
     soil: R,
+    v: &ViewTerms<R>,
 ) -> SailOutput<R> {
     let one = R::one();
     let (lai, tss, too) = (l.lai, l.tss, l.too);
@@ -777,42 +844,35 @@ fn sail_core<R: Real, const HEMI: bool>(
 
     let j1ks = jfunc1(d.ks_m, d.inv_ks_m, lai, s.e1, tss);
     let j2ks = (one - tss * s.e1) * d.inv_ks_p;
-    let j1ko = jfunc1(d.ko_m, d.inv_ko_m, lai, s.e1, too);
-    let j2ko = (one - too * s.e1) * d.inv_ko_p;
 
     let ps = d.s_down * j1ks;
     let qs = d.s_up * j2ks;
-    let pv = d.v_down * j1ko;
-    let qv = d.v_up * j2ko;
 
     let (rdd, tdd) = (s.rdd, s.tdd);
     let tsd = (ps - s.re * qs) * s.inv_denom;
-    let tdo = (pv - s.re * qv) * s.inv_denom;
-    let rdo = (qv - s.re * pv) * s.inv_denom;
+    let (tdo, rdo) = (v.tdo, v.rdo);
 
     let g1 = (l.z - j1ks * too) * d.inv_ko_p;
-    let g2 = (l.z - j1ko * tss) * d.inv_ks_p;
+    let g2 = (l.z - v.j1ko * tss) * d.inv_ks_p;
     let t1 = d.v_up * g1 * d.s_down;
     let t2 = d.v_down * g2 * d.s_up;
     let t3 = (rdo * qs + tdo * ps) * rinf;
     let rsod = (t1 + t2 - t3) * md.inv_1m_rinf2;
     let rsos = d.w * lai * l.sumint;
 
-    let inv_dn = one / (one - soil * rdd);
-    let soil_tdd_dn = soil * tdd * inv_dn;
-    let rdot = rdo + (tdo + too) * soil_tdd_dn;
+    let inv_dn = v.inv_dn;
     let rsodt = rsod + ((tss + tsd) * tdo + (tsd + tss * soil * rdd) * too) * soil * inv_dn;
     let rsost = rsos + l.tsstoo * soil;
     let rsot = rsost + rsodt;
     let (rsdt, rddt) = if HEMI {
         let rsd = (qs - s.re * ps) * s.inv_denom;
-        (rsd + (tsd + tss) * soil_tdd_dn, rdd + tdd * soil_tdd_dn)
+        (rsd + (tsd + tss) * v.soil_tdd_dn, rdd + tdd * v.soil_tdd_dn)
     } else {
         (R::zero(), R::zero())
     };
     SailOutput {
         rsot,
-        rdot,
+        rdot: v.rdot,
         rsdt,
         rddt,
         tss,
@@ -822,6 +882,17 @@ fn sail_core<R: Real, const HEMI: bool>(
         tdd,
         rdd,
     }
+}
+
+#[inline]
+fn sail_core<R: Real, const HEMI: bool>(
+    l: &Layer<R>,
+    md: &Medium<R>,
+    d: &Directional<R>,
+    s: &Slab<R>,
+    soil: R,
+) -> SailOutput<R> {
+    sail_sun::<R, HEMI>(l, md, d, s, soil, &view_terms(l, d, s, soil))
 }
 
 /// Fraction of diffuse (sky) irradiance for sun zenith `tts` in radians (François et al. 2002):

@@ -4,7 +4,9 @@
 //! `Σ_λ M[λ, b]·R(λ)`, with `M` a borrowed `n_wavelengths × n_bands` row-major matrix whose columns
 //! sum to 1 (`sentinel2_full_resampling_matrix.csv` for Sentinel-2). Most of `M` is zero, so
 //! [`Resampling::new`] records the wavelength spans where any band has weight and the model is
-//! evaluated only there (884 of 2101 wavelengths for Sentinel-2).
+//! evaluated only there (884 of 2101 wavelengths for Sentinel-2), and each band's first and last
+//! wavelength with weight: a batch of wavelengths evaluated together (lanes) is added only to the
+//! bands it meets (one or two of the 13 for most batches), lane by lane.
 
 use crate::real::{Lanes, Real};
 use crate::Error;
@@ -25,6 +27,8 @@ pub struct Resampling<'a> {
     n_bands: usize,
     spans: [(usize, usize); MAX_BANDS],
     n_spans: usize,
+    /// Per band: first and last wavelength index with weight (`(1, 0)` for a band without).
+    ranges: [(usize, usize); MAX_BANDS],
 }
 
 impl<'a> Resampling<'a> {
@@ -50,20 +54,11 @@ impl<'a> Resampling<'a> {
             });
         }
         // Per band: first and last wavelength with non-zero weight.
-        let mut ranges = [(usize::MAX, 0usize); MAX_BANDS];
-        for (i, row) in matrix.chunks_exact(n_bands).enumerate() {
-            for (b, &w) in row.iter().enumerate() {
-                if w != 0.0 {
-                    let r = &mut ranges[b];
-                    r.0 = r.0.min(i);
-                    r.1 = r.1.max(i);
-                }
-            }
-        }
+        let ranges = band_ranges(n_wl, n_bands, |i, b| matrix[i * n_bands + b]);
         // Sort the band ranges by start and merge overlapping or adjacent ones.
         let mut list = [(usize::MAX, 0usize); MAX_BANDS];
         let mut n = 0;
-        for r in ranges[..n_bands].iter().filter(|r| r.0 != usize::MAX) {
+        for r in ranges[..n_bands].iter().filter(|r| r.0 <= r.1) {
             list[n] = *r;
             n += 1;
         }
@@ -85,6 +80,7 @@ impl<'a> Resampling<'a> {
             n_bands,
             spans,
             n_spans,
+            ranges,
         })
     }
 
@@ -155,22 +151,24 @@ impl<'a> Resampling<'a> {
     /// at a time: `spectrum(i0)` returns lanes whose lane `j` is the value at wavelength index
     /// `i0 + j`. Runs start at the beginning of each span of [`Resampling::spans`], so a span's
     /// last run may reach past it (or past the grid, which the caller clamps); those lanes are
-    /// ignored, as are wavelengths without weight.
+    /// ignored, as are wavelengths without weight. The bands are summed lane by lane
+    /// (each band keeps lanes of partial sums), so the order of the additions differs from
+    /// [`Resampling::integrate`]'s.
     pub fn integrate_lanes<R: Real, W: Lanes<R>>(
         &self,
         mut spectrum: impl FnMut(usize) -> W,
         out: &mut [R],
     ) -> Result<(), Error> {
         self.check_out(out)?;
-        out.iter_mut().for_each(|o| *o = R::zero());
+        let mut sums = BandSums::<W>::new(&self.ranges[..self.n_bands]);
         for &(a, b) in self.spans() {
             for i0 in (a..=b).step_by(W::WIDTH.max(1)) {
-                let values = spectrum(i0);
-                for (j, i) in (i0..=b.min(i0 + W::WIDTH - 1)).enumerate() {
-                    self.accumulate(i, values.lane(j), out);
-                }
+                sums.add(i0, b, spectrum(i0), |i, band| {
+                    self.matrix[i * self.n_bands + band]
+                });
             }
         }
+        sums.finish(out);
         Ok(())
     }
 
@@ -184,6 +182,89 @@ impl<'a> Resampling<'a> {
             });
         }
         self.integrate(|i| spectrum[i], out)
+    }
+}
+
+/// Per band: the first and last of `n_rows` rows whose weight `weight(row, band)` is not zero
+/// (`(1, 0)` for a band without), for bands `0..n_bands` (at most [`MAX_BANDS`]).
+pub(crate) fn band_ranges(
+    n_rows: usize,
+    n_bands: usize,
+    weight: impl Fn(usize, usize) -> f64,
+) -> [(usize, usize); MAX_BANDS] {
+    let mut ranges = [(1usize, 0usize); MAX_BANDS];
+    for (b, r) in ranges.iter_mut().enumerate().take(n_bands) {
+        if let Some(first) = (0..n_rows).find(|&i| weight(i, b) != 0.0) {
+            let last = (first..n_rows).rev().find(|&i| weight(i, b) != 0.0);
+            *r = (first, last.unwrap_or(first));
+        }
+    }
+    ranges
+}
+
+/// Band values accumulated from batches of lanes: each band keeps lanes of partial sums, to
+/// which a batch of rows `i0, i0 + 1, …` is added weighted when it meets the band's row range;
+/// [`BandSums::finish`] sums the lanes. Lanes with zero weight add nothing (a NaN value in a
+/// band's range makes the band NaN).
+pub(crate) struct BandSums<'r, W> {
+    ranges: &'r [(usize, usize)],
+    acc: [W; MAX_BANDS],
+}
+
+impl<'r, W: Real> BandSums<'r, W> {
+    /// Zero sums for bands with row ranges `ranges` (at most [`MAX_BANDS`]).
+    #[inline(always)]
+    pub(crate) fn new(ranges: &'r [(usize, usize)]) -> Self {
+        BandSums {
+            ranges,
+            acc: [W::zero(); MAX_BANDS],
+        }
+    }
+
+    /// Adds the lanes `v` of rows `i0, i0 + 1, …` (those after `last` are not rows of this
+    /// run and are left out), weighted by `weight(row, band)`, to the bands they meet.
+    #[inline(always)]
+    pub(crate) fn add<R: Real>(
+        &mut self,
+        i0: usize,
+        last: usize,
+        v: W,
+        weight: impl Fn(usize, usize) -> f64,
+    ) where
+        W: Lanes<R>,
+    {
+        let end = last.min(i0 + W::WIDTH - 1);
+        for b in 0..self.ranges.len().min(MAX_BANDS) {
+            let (lo, hi) = self.ranges[b];
+            if lo > end || hi < i0 {
+                continue;
+            }
+            let (from, to) = (lo.max(i0), hi.min(end));
+            let w = W::plain_from_fn(|j| {
+                let i = i0 + j;
+                if i >= from && i <= to {
+                    weight(i, b)
+                } else {
+                    0.0
+                }
+            });
+            self.acc[b] += v.scale(w);
+        }
+    }
+
+    /// The band values (one per range): each band's lanes summed.
+    #[inline(always)]
+    pub(crate) fn finish<R: Real>(&self, out: &mut [R])
+    where
+        W: Lanes<R>,
+    {
+        for (o, acc) in out.iter_mut().zip(&self.acc) {
+            let mut s = acc.lane(0);
+            for j in 1..W::WIDTH {
+                s += acc.lane(j);
+            }
+            *o = s;
+        }
     }
 }
 
@@ -227,7 +308,7 @@ mod tests {
             |i0| {
                 starts[batches] = i0;
                 batches += 1;
-                F64x4(core::array::from_fn(|j| (i0 + j) as f64))
+                F64x4::new(core::array::from_fn(|j| (i0 + j) as f64))
             },
             &mut out4,
         )

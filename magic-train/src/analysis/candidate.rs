@@ -40,6 +40,22 @@ pub struct Candidate {
     pub margin: f64,
     /// The surrogate scores the chance level comes from.
     pub surrogate_scores: Vec<f64>,
+    /// Why the fit cannot count as a discovery whatever its score, if it cannot.
+    pub rejected: Option<String>,
+    /// Standard deviations of the key parameters (parametric bootstrap; significant candidates
+    /// only).
+    pub uncertainty: Vec<ParamSd>,
+}
+
+/// A parameter with its standard deviation.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ParamSd {
+    /// Name (as in the candidate's `params`).
+    pub name: String,
+    /// The fitted value.
+    pub value: f64,
+    /// Its standard deviation.
+    pub sd: f64,
 }
 
 impl Candidate {
@@ -68,6 +84,8 @@ impl Candidate {
             chance_sd,
             margin,
             surrogate_scores: chance,
+            rejected: None,
+            uncertainty: vec![],
         }
     }
 
@@ -89,6 +107,8 @@ impl Candidate {
             "excess": self.excess(),
             "margin": self.margin,
             "declarable": self.effect.is_some(),
+            "rejected": self.rejected,
+            "uncertainty": self.uncertainty,
             "surrogate_scores": self.surrogate_scores,
         })
     }

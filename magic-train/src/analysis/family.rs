@@ -9,7 +9,7 @@
 //!
 //! [`Effect`]: magic_core::effects::Effect
 
-use super::{AnalysisOptions, Candidate};
+use super::{AnalysisOptions, Candidate, ParamSd};
 use crate::model::OwnedEffect;
 use anyhow::Result;
 use rand::rngs::StdRng;
@@ -34,6 +34,27 @@ pub trait Family<R>: Sync {
     fn params(&self, res: &R, fit: &Self::Fit) -> serde_json::Value;
     /// The effect that adds the fit to F (`None`: not declarable, or already declared).
     fn declare(&self, res: &R, fit: &Self::Fit) -> Option<OwnedEffect>;
+    /// Why the fit cannot count as a discovery whatever its score (a position on the bound of
+    /// its search grid is not a discovery), if it cannot.
+    fn reject(&self, _res: &R, _fit: &Self::Fit) -> Option<String> {
+        None
+    }
+    /// A detection statistic of the fit (larger: stronger) that must also exceed every
+    /// surrogate's, where the score alone can be met by structure the surrogates lack (the step
+    /// scan's peak: a level that wanders for years explains held-out days like a step, but only
+    /// a step is sharper than the noise makes its local jumps); `None` for most families.
+    fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
+        None
+    }
+    /// The fit's key parameters (name, value), whose uncertainty the bootstrap measures.
+    fn key_params(&self, _res: &R, _fit: &Self::Fit) -> Vec<(&'static str, f64)> {
+        vec![]
+    }
+    /// Residuals holding the fitted effect plus fresh noise drawn like the surrogates' (the
+    /// parametric bootstrap of the fit's parameters); `None` for a family without one.
+    fn resample(&self, _res: &R, _fit: &Self::Fit, _rng: &mut StdRng) -> Option<Result<R>> {
+        None
+    }
 }
 
 /// A family behind a trait object: what the analysis and the registries hold.
@@ -65,21 +86,84 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
         let fit = self.fit(res)?;
         let score = self.score(&fit);
         let seeds = surrogate_seeds(opts.seed, self.name(), opts.surrogates.max(2));
-        let chance = seeds
+        let surrogates = seeds
             .par_iter()
             .map(|s| {
                 let mut rng = StdRng::seed_from_u64(*s);
                 let sur = self.surrogate(res, &fit, &mut rng)?;
-                Ok(self.score(&self.fit(&sur)?))
+                let f = self.fit(&sur)?;
+                Ok((self.score(&f), self.statistic(&f)))
             })
-            .collect::<Result<Vec<f64>>>()?;
-        Ok(Candidate::from_scores(
+            .collect::<Result<Vec<(f64, Option<f64>)>>>()?;
+        let chance = surrogates.iter().map(|s| s.0).collect();
+        let mut c = Candidate::from_scores(
             self.name(),
             score,
             chance,
             opts.quantile,
             self.params(res, &fit),
             self.declare(res, &fit),
-        ))
+        );
+        if let Some(why) = self.reject(res, &fit) {
+            c.significant = false;
+            c.rejected = Some(why);
+        } else if let Some(stat) = self.statistic(&fit) {
+            let top = surrogates
+                .iter()
+                .filter_map(|s| s.1)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if stat <= top {
+                c.significant = false;
+                c.rejected = Some(format!(
+                    "detection statistic {stat:.3} not above the surrogates' largest, {top:.3}"
+                ));
+            }
+        }
+        if c.significant && opts.bootstrap > 0 {
+            c.uncertainty = bootstrap(self, res, &fit, opts)?;
+        }
+        Ok(c)
     }
+}
+
+/// The parametric bootstrap of a fit's key parameters: `opts.bootstrap` residual sets holding the
+/// fitted effect plus fresh noise ([`Family::resample`]), each refitted; the standard deviation
+/// of each key parameter over the draws.
+fn bootstrap<R: Sync, F: Family<R>>(
+    family: &F,
+    res: &R,
+    fit: &F::Fit,
+    opts: &AnalysisOptions,
+) -> Result<Vec<ParamSd>> {
+    let keys = family.key_params(res, fit);
+    if keys.is_empty() {
+        return Ok(vec![]);
+    }
+    let seeds = surrogate_seeds(opts.seed ^ 0xB007, family.name(), opts.bootstrap.max(2));
+    let draws = seeds
+        .par_iter()
+        .filter_map(|s| {
+            let mut rng = StdRng::seed_from_u64(*s);
+            family.resample(res, fit, &mut rng).map(|r| {
+                let r = r?;
+                let f = family.fit(&r)?;
+                Ok(family.key_params(&r, &f))
+            })
+        })
+        .collect::<Result<Vec<Vec<(&'static str, f64)>>>>()?;
+    if draws.len() < 2 {
+        return Ok(vec![]);
+    }
+    Ok(keys
+        .iter()
+        .enumerate()
+        .map(|(k, (name, value))| {
+            let v: Vec<f64> = draws.iter().filter_map(|d| d.get(k).map(|x| x.1)).collect();
+            ParamSd {
+                name: name.to_string(),
+                value: *value,
+                sd: crate::numerics::sd(&v),
+            }
+        })
+        .collect())
 }

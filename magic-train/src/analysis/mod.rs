@@ -13,7 +13,7 @@ pub mod projection;
 pub mod score;
 pub mod surrogate;
 
-pub use candidate::{Candidate, MIN_EXCESS, SD_MARGIN};
+pub use candidate::{Candidate, ParamSd, MIN_EXCESS, SD_MARGIN};
 pub use family::{surrogate_seeds, DynFamily, Family};
 
 use crate::data::SplitName;
@@ -27,39 +27,47 @@ use std::path::Path;
 /// Options of [`analyse`], checked once by the problem's residuals.
 #[derive(Clone, Debug)]
 pub struct AnalysisOptions {
-    /// The split the families are fitted on.
-    pub split: SplitName,
-    /// The splits fitted families are scored on (`None`: the problem's default, see
-    /// [`Problem::default_held`]).
-    pub held: Option<Vec<SplitName>>,
+    /// The splits analysed (`None`: the problem's default, [`Problem::default_splits`]). How
+    /// they are held out is the problem's: the volcano analyses its whole record and holds out
+    /// stations and blocks of days; the forest fits on the first split and scores on the others
+    /// (other sites).
+    pub splits: Option<Vec<SplitName>>,
     /// Surrogates per family for the chance level.
     pub surrogates: usize,
     /// Quantile of the surrogate scores taken as the chance level.
     pub quantile: f64,
-    /// Seed of the surrogates.
+    /// Seed of the surrogates and of the bootstrap.
     pub seed: u64,
+    /// Bootstrap draws for the uncertainty of a significant candidate's key parameters (0: none).
+    pub bootstrap: usize,
 }
 
 impl Default for AnalysisOptions {
     fn default() -> Self {
         AnalysisOptions {
-            split: SplitName::Train,
-            held: None,
+            splits: None,
             surrogates: 20,
             quantile: 0.95,
             seed: 0,
+            bootstrap: 20,
         }
     }
 }
 
 impl AnalysisOptions {
-    /// The held-out splits for `problem` (never the analysed one).
-    pub fn held_splits<P: Problem + ?Sized>(&self, problem: &P) -> Vec<SplitName> {
-        let h = self
-            .held
+    /// The analysed splits for `problem`, without repeats.
+    pub fn splits_for<P: Problem + ?Sized>(&self, problem: &P) -> Vec<SplitName> {
+        let mut out: Vec<SplitName> = Vec::new();
+        for s in self
+            .splits
             .clone()
-            .unwrap_or_else(|| problem.default_held(self.split));
-        h.into_iter().filter(|s| *s != self.split).collect()
+            .unwrap_or_else(|| problem.default_splits())
+        {
+            if !out.contains(&s) {
+                out.push(s);
+            }
+        }
+        out
     }
 }
 
@@ -68,10 +76,8 @@ impl AnalysisOptions {
 pub struct Analysis {
     /// The problem's name.
     pub problem: &'static str,
-    /// Analysed split.
-    pub split: SplitName,
-    /// Held-out splits.
-    pub held: Vec<SplitName>,
+    /// Analysed splits.
+    pub splits: Vec<SplitName>,
     /// Candidates ranked by excess over chance, descending.
     pub effects: Vec<Candidate>,
     /// What the problem reports about the residuals themselves.
@@ -96,8 +102,7 @@ impl Analysis {
     pub fn to_json(&self) -> serde_json::Value {
         json!({
             "problem": self.problem,
-            "split": self.split,
-            "held": self.held,
+            "splits": self.splits,
             "effects": self.effects.iter().map(Candidate::to_json).collect::<Vec<_>>(),
             "residuals": self.residuals,
             "seconds": self.seconds,
@@ -161,8 +166,7 @@ pub fn analyse<P: Problem + ?Sized>(
     Ok((
         Analysis {
             problem: problem.name(),
-            split: opts.split,
-            held: opts.held_splits(problem),
+            splits: opts.splits_for(problem),
             effects,
             residuals,
             summary,

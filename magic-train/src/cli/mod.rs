@@ -10,10 +10,12 @@ pub mod export;
 pub mod forward;
 pub mod invert;
 pub mod lai;
+pub mod map;
 pub mod missing;
 pub mod prepare;
 pub mod reproduce;
 pub mod residuals;
+pub mod station;
 pub mod synth;
 pub mod tenv3;
 pub mod train;
@@ -50,6 +52,8 @@ pub enum Cmd {
     Invert(invert::RowsArgs),
     /// Build the firmware with a model and invert observations on it under QEMU.
     Qemu(invert::RowsArgs),
+    /// Talk to a board running the deployable firmware (or QEMU): upload a model, stream days.
+    Station(station::StationCmd),
     /// Evaluate a forward model.
     #[command(subcommand)]
     Forward(forward::ForwardCmd),
@@ -67,6 +71,10 @@ pub enum Cmd {
     SynthCheck(synth::SynthCheckCmd),
     /// The loop on synthetic data: one dataset per scenario, what it added, MSE before and after.
     SynthLoop(synth::SynthLoopCmd),
+    /// Map the forest variables of a Sentinel-2 image (RTM model, variant B or C): GeoTIFF in,
+    /// float32 GeoTIFF out with one band per column of `magic invert` (the variables,
+    /// `residual_rms`, `flags`), then one standard-deviation band per variable (`<name>_sd`).
+    Map(map::MapCmd),
     /// Retrieved LAI of a forest model against the SNAP LAI of the site extract.
     Lai(lai::LaiCmd),
     /// Inversion with stations down.
@@ -88,6 +96,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Cmd::Export(a) => export::run(a),
         Cmd::Invert(a) => invert::invert(a),
         Cmd::Qemu(a) => invert::qemu(a),
+        Cmd::Station(a) => station::run(a),
         Cmd::Forward(a) => forward::run(a),
         Cmd::Residuals(a) => residuals::run(a),
         Cmd::Loop(a) => closed_loop::run(a),
@@ -95,6 +104,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Cmd::Synth(a) => synth::synth(a),
         Cmd::SynthCheck(a) => synth::check(a),
         Cmd::SynthLoop(a) => synth::run_loop(a),
+        Cmd::Map(a) => map::run(a),
         Cmd::Lai(a) => lai::run(a),
         Cmd::Missing(a) => missing::run(a),
         Cmd::Classical(a) => classical::run(a),

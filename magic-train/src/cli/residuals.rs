@@ -17,13 +17,14 @@ pub struct ResidualsCmd {
     model: ModelArg,
     #[command(flatten)]
     data: DataArgs,
-    /// The split the families are fitted on.
-    #[arg(long, value_enum, default_value = "train")]
-    split: SplitName,
-    /// The splits fitted families are scored on, comma-separated (default: the volcano's other
-    /// splits; the forest's next split, train → valid, valid → test).
+    /// The splits analysed, comma-separated (default: the volcano's whole record, held out by
+    /// stations and blocks of days; the forest's train sites fitted, valid sites scored — the
+    /// first named split is fitted, the others scored).
     #[arg(long, value_enum, value_delimiter = ',')]
-    held: Vec<SplitName>,
+    splits: Vec<SplitName>,
+    /// Bootstrap draws for the uncertainty of significant candidates' parameters (0: none).
+    #[arg(long, default_value_t = 20)]
+    bootstrap: usize,
     /// Surrogates per family for the chance level.
     #[arg(long, default_value_t = 20)]
     surrogates: usize,
@@ -42,8 +43,8 @@ pub fn run(a: &ResidualsCmd) -> Result<()> {
     let bytes = a.model.read()?;
     let m = decode(&a.model.model, &bytes)?;
     let opts = AnalysisOptions {
-        split: a.split,
-        held: (!a.held.is_empty()).then(|| a.held.clone()),
+        splits: (!a.splits.is_empty()).then(|| a.splits.clone()),
+        bootstrap: a.bootstrap,
         surrogates: a.surrogates,
         seed: a.seed,
         ..AnalysisOptions::default()

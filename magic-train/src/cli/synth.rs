@@ -1,12 +1,13 @@
-//! `magic synth`, `magic synth-check`, `magic synth-loop`: synthetic GNSS data with one injected
-//! effect, and how well the analysis and the loop recover it.
+//! `magic synth`, `magic synth-check`, `magic synth-loop`: synthetic GNSS data with injected
+//! effects, and how well the analysis and the loop recover them.
 
 use super::args::{write_file, JsonOut};
 use crate::analysis::AnalysisOptions;
 use crate::closed_loop::{self, LoopOptions};
+use crate::data::SplitName;
 use crate::gnss::data::write_dir;
 use crate::gnss::recovery::{check_one, recovery_table};
-use crate::gnss::synth::{self, Scenario};
+use crate::gnss::synth::{self, NoiseModel, Scenario, Spec};
 use crate::problem::Problem;
 use anyhow::Result;
 use clap::Args;
@@ -16,40 +17,83 @@ use std::path::PathBuf;
 /// `magic synth`.
 #[derive(Args, Clone, Debug)]
 pub struct SynthCmd {
-    /// Scenario: `clean`, or the effect family injected.
+    /// Scenario: `clean`, the effect family injected, or a variant (`--list` shows them all).
     #[arg(long, value_enum, default_value = "clean")]
     scenario: Scenario,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Noise model (and main-source history): `paper` (the original generator) or `red` (an
+    /// independent one on the release's 2006–2024 record).
+    #[arg(long, value_enum, default_value = "paper")]
+    noise: NoiseModel,
+    /// The period in which events (a step, a second source) begin.
+    #[arg(long, value_enum, default_value = "train")]
+    placement: SplitName,
     /// Output folder (the release layout, plus `truth.json`).
+    #[arg(long, required_unless_present = "list")]
+    out: Option<PathBuf>,
+    /// List the scenarios and exit.
     #[arg(long)]
-    out: PathBuf,
+    list: bool,
 }
 
 /// Runs `magic synth`.
 pub fn synth(a: &SynthCmd) -> Result<()> {
-    let s = synth::generate(a.scenario, a.seed);
-    write_dir(&s.problem, &a.out)?;
+    if a.list {
+        print!("{}", synth::scenario::list());
+        return Ok(());
+    }
+    let Some(out) = &a.out else {
+        anyhow::bail!("--out is required");
+    };
+    let s = Spec::new(a.scenario, a.seed)
+        .noise(a.noise)
+        .placed(a.placement)
+        .generate();
+    write_dir(&s.problem, out)?;
     write_file(
-        &a.out.join("truth.json"),
+        &out.join("truth.json"),
         serde_json::to_string_pretty(&s.truth)?,
     )?;
     eprintln!(
         "wrote synthetic dataset ({}) -> {}",
         s.problem.data.source,
-        a.out.display()
+        out.display()
     );
     Ok(())
 }
 
-/// Scenarios (default: all), comma-separated.
+/// Scenarios (default: all).
 fn scenarios(list: &[Scenario]) -> Vec<Scenario> {
     if list.is_empty() {
         Scenario::ALL.to_vec()
     } else {
         list.to_vec()
     }
+}
+
+/// Every combination of scenario, noise model and placement, once per scenario without events.
+fn specs(
+    scenarios: &[Scenario],
+    noises: &[NoiseModel],
+    placements: &[SplitName],
+    seed: u64,
+) -> Vec<Spec> {
+    let mut out = Vec::new();
+    for &sc in scenarios {
+        for &noise in noises {
+            let places: &[SplitName] = if sc.has_event() {
+                placements
+            } else {
+                &placements[..1]
+            };
+            for &pl in places {
+                out.push(Spec::new(sc, seed).noise(noise).placed(pl));
+            }
+        }
+    }
+    out
 }
 
 /// `magic synth-check`.
@@ -61,39 +105,62 @@ pub struct SynthCheckCmd {
     /// First seed.
     #[arg(long, default_value_t = 1)]
     first_seed: u64,
-    /// Scenarios, comma-separated (default: all).
+    /// Scenarios, comma-separated (default: all; `magic synth --list` shows them).
     #[arg(long, value_enum, value_delimiter = ',')]
     scenarios: Vec<Scenario>,
+    /// Noise models, comma-separated: a line of the table per model.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "paper")]
+    noise: Vec<NoiseModel>,
+    /// Placements of the events, comma-separated (scenarios without events run once).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "train")]
+    placement: Vec<SplitName>,
     /// Training epochs of the B models.
     #[arg(long, default_value_t = 15)]
     epochs: usize,
+    /// Write the table (Markdown) here too.
+    #[arg(long)]
+    table: Option<PathBuf>,
     #[command(flatten)]
     json: JsonOut,
 }
 
-/// Runs `magic synth-check`: for every scenario and seed, generate the data, train a B model
-/// briefly, analyse it and compare with the injected truth.
+/// Runs `magic synth-check`: for every scenario, noise model, placement and seed, generate the
+/// data, train a B model briefly, analyse it and compare with the injected truth.
 pub fn check(a: &SynthCheckCmd) -> Result<()> {
     let cfg = crate::train::TrainConfig::gnss().with(a.epochs, true);
     let opts = AnalysisOptions::default();
     let (mut rows, mut out) = (Vec::new(), Vec::new());
-    for sc in scenarios(&a.scenarios) {
+    let start = std::time::Instant::now();
+    for spec in specs(&scenarios(&a.scenarios), &a.noise, &a.placement, 0) {
         for seed in a.first_seed..a.first_seed + a.seeds {
-            let (r, an) = check_one(sc, seed, &cfg, &opts)?;
+            let spec = Spec { seed, ..spec };
+            let t0 = std::time::Instant::now();
+            let (r, an) = check_one(&spec, &cfg, &opts)?;
+            let secs = t0.elapsed().as_secs_f64();
             eprintln!(
-                "{:<14} seed {:>3}: top {:<14} {}  {}",
-                sc.name(),
+                "{:<22} {:<5} {:<5} seed {:>3}: top {:<14} {}  {}",
+                r.scenario,
+                r.placement,
+                r.noise,
                 seed,
                 r.top,
                 if r.ok() { "ok  " } else { "FAIL" },
-                r.detail
+                r.detail()
             );
-            out.push(json!({"scenario": sc.name(), "seed": seed, "ok": r.ok(), "ranked_first": r.ranked_first,
-                "significant": r.significant, "params_ok": r.params_ok, "detail": r.detail, "analysis": an.to_json()}));
+            out.push(json!({"recovery": r.to_json(), "seconds": secs, "analysis": an.to_json()}));
             rows.push(r);
         }
     }
-    print!("{}", recovery_table(&rows));
+    let table = recovery_table(&rows);
+    print!("{table}");
+    eprintln!(
+        "{} analyses in {:.0} s",
+        rows.len(),
+        start.elapsed().as_secs_f64()
+    );
+    if let Some(p) = &a.table {
+        write_file(p, &table)?;
+    }
     a.json.write(&out)
 }
 
@@ -106,6 +173,12 @@ pub struct SynthLoopCmd {
     /// Seed of the data and the training.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Noise model.
+    #[arg(long, value_enum, default_value = "paper")]
+    noise: NoiseModel,
+    /// The period in which events begin.
+    #[arg(long, value_enum, default_value = "train")]
+    placement: SplitName,
     /// Maximum epochs per training.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
@@ -117,14 +190,27 @@ pub struct SynthLoopCmd {
     out: PathBuf,
 }
 
+/// A folder name for a scenario (`+` spelled `-and-`).
+fn folder(spec: &Spec) -> String {
+    let mut name = spec.scenario.name().replace('+', "-and-");
+    if spec.noise != NoiseModel::Paper {
+        name += &format!("-{}", spec.noise.name());
+    }
+    if spec.scenario.has_event() && spec.placement != SplitName::Train {
+        name += &format!("-{}", spec.placement);
+    }
+    name
+}
+
 /// Runs `magic synth-loop`: the loop on one synthetic dataset per scenario, with a table of the
 /// effects it added and the test MSE of B and C before and after.
 pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
     let mut table = String::from(
-        "| injected | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|\n",
+        "| injected | placement | noise | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|\n",
     );
     for sc in scenarios(&a.scenarios) {
-        let s = synth::generate(sc, a.seed);
+        let spec = Spec::new(sc, a.seed).noise(a.noise).placed(a.placement);
+        let s = spec.generate();
         let opts = LoopOptions {
             seed: a.seed,
             train: s.problem.recipe().with(a.epochs, true),
@@ -132,8 +218,8 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
             baseline: false,
             analysis: AnalysisOptions::default(),
         };
-        let dir = a.out.join(sc.name());
-        eprintln!("scenario {} (seed {})", sc.name(), a.seed);
+        let dir = a.out.join(folder(&spec));
+        eprintln!("scenario {} ({})", sc.name(), s.problem.data.source);
         let r = closed_loop::run(&s.problem, &opts, &dir)?;
         write_file(
             &dir.join("truth.json"),
@@ -142,8 +228,10 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
         let (first, last) = (r.first(), r.last_kept());
         let added = r.added();
         table += &format!(
-            "| {} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
+            "| {} | {} | {} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
             sc.name(),
+            spec.placement_label(),
+            a.noise.name(),
             if added.is_empty() {
                 "none".to_string()
             } else {
@@ -158,4 +246,34 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
     print!("{table}");
     std::fs::create_dir_all(&a.out)?;
     write_file(&a.out.join("table.md"), &table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scenarios_without_events_run_once() {
+        let all = [SplitName::Train, SplitName::Valid, SplitName::Test];
+        let s = specs(
+            &[
+                Scenario::Clean,
+                Scenario::Step,
+                Scenario::CommonModeSeasonal,
+            ],
+            &NoiseModel::ALL,
+            &all,
+            1,
+        );
+        assert_eq!(s.len(), 2 * (1 + 3 + 1));
+        assert_eq!(s.iter().filter(|x| x.scenario == Scenario::Step).count(), 6);
+        assert_eq!(
+            folder(&Spec::new(Scenario::SecondSourceStep, 1).placed(SplitName::Test)),
+            "second_source-and-step-test"
+        );
+        assert_eq!(
+            folder(&Spec::new(Scenario::Clean, 1).noise(NoiseModel::Red)),
+            "clean-red"
+        );
+    }
 }

@@ -106,19 +106,33 @@ pub fn result_header(model: &Model<'_>, with_date: bool) -> String {
     if with_date {
         h.push_str("date,");
     }
-    let names: &[&str] = match (&model.problem, model.variant) {
-        (Problem::Mogi { .. }, _) => &magic_core::mogi::PARAM_NAMES,
-        (Problem::Rtm { .. }, magic_core::Variant::A) => {
-            &["z0", "z1", "z2", "z3", "z4", "z5", "z6"]
-        }
-        (Problem::Rtm { .. }, _) => &RTM_RESULT_NAMES,
-    };
-    for n in names {
-        h.push_str(n);
-        h.push(',');
-    }
-    h.push_str("residual_rms,flags,stations_used");
+    h.push_str(&result_columns(model).join(","));
     h
+}
+
+/// The result columns of `model` (no `date`): its variables — for a GNSS network the source's,
+/// then the latent variables of each declared effect — then `residual_rms`, `flags`,
+/// `stations_used`.
+pub fn result_columns(model: &Model<'_>) -> Vec<String> {
+    use magic_core::effects::Effect;
+    let mut names: Vec<String> = match (&model.problem, model.variant) {
+        (Problem::Mogi { .. }, _) => magic_core::mogi::PARAM_NAMES.map(String::from).to_vec(),
+        (Problem::Rtm { .. }, magic_core::Variant::A) => (0..7).map(|i| format!("z{i}")).collect(),
+        (Problem::Rtm { .. }, _) => RTM_RESULT_NAMES.map(String::from).to_vec(),
+    };
+    if let Problem::Mogi { .. } = model.problem {
+        for e in &model.effects {
+            let latent: &[&str] = match e {
+                Effect::CommonMode => &["cm_e_mm", "cm_n_mm", "cm_u_mm"],
+                Effect::Elevation { .. } => &["elev_mm_per_km"],
+                Effect::SecondSource { .. } => &["dv2_1e6m3"],
+                _ => &[],
+            };
+            names.extend(latent.iter().map(|s| s.to_string()));
+        }
+    }
+    names.extend(["residual_rms", "flags", "stations_used"].map(String::from));
+    names
 }
 
 /// Result columns of an RTM inversion: the 7 learned variables, then the derived crown diameter

@@ -116,8 +116,8 @@ fn rustc() -> String {
 }
 
 /// Builds started from this process run one after the other: cargo writes the firmware's ELF to
-/// the same path whatever the model.
-static BUILD: Mutex<()> = Mutex::new(());
+/// the same path whatever the model (and whichever build: see also `qemu_uart`).
+pub static BUILD: Mutex<()> = Mutex::new(());
 
 /// The firmware features a model needs: `rtm` for an RTM model (the default firmware links only
 /// the Mogi forward model and holds the 48 KiB budget). A file that does not decode gets the
@@ -144,6 +144,7 @@ pub fn build_firmware_with(model_path: &Path, extra_features: &[&str]) -> Result
         .with_context(|| format!("model file {}", model_path.display()))?;
     let model =
         std::fs::read(&model_path).with_context(|| format!("reading {}", model_path.display()))?;
+    check_int8(&model_path, &model)?;
     let root = workspace_root()?;
     let mut features = firmware_features(&model);
     features.extend_from_slice(extra_features);
@@ -184,8 +185,48 @@ pub fn build_firmware_with(model_path: &Path, extra_features: &[&str]) -> Result
     Ok(copy)
 }
 
+/// Room for the model in the budgeted firmware: memory.x's 48 KiB of flash less the firmware's
+/// own code and constants (27 769 bytes measured with the Akutan model: 46 668 − 18 899), with
+/// about 1 KB of margin.
+pub const MODEL_ROOM: usize = 20 * 1024;
+
+/// The budgeted firmware (memory.x: 48 KiB of flash, the model included) runs int8 Mogi models:
+/// an f32 model (what `magic train` writes, about four times larger than its int8 export) that
+/// exceeds [`MODEL_ROOM`] only makes the link fail with "section .rodata will not fit in region
+/// FLASH". Says what to do instead, before building. (A file that does not decode is left to
+/// the firmware, which reports it; RTM models get the larger `rtm` layout.)
+pub fn check_int8(path: &Path, model: &[u8]) -> Result<()> {
+    let Ok(m) = magic_core::Model::decode(model) else {
+        return Ok(());
+    };
+    if matches!(m.problem, magic_core::Problem::Rtm { .. }) {
+        return Ok(());
+    }
+    // `magic export` quantises every layer but the encoder's head (B, C); `magic train` writes
+    // f32 layers only.
+    let layers = m.encoder.len() + m.decoder.len();
+    let int8 = m
+        .encoder
+        .iter()
+        .chain(m.decoder.iter())
+        .filter(|l| matches!(l.weights, magic_core::nn::Weights::Int8 { .. }))
+        .count();
+    if layers > 0 && int8 == 0 && model.len() > MODEL_ROOM {
+        bail!(
+            "{}: an f32 model ({} bytes, no int8 layer: what `magic train` writes); the firmware \
+             has room for about {MODEL_ROOM} bytes of model in its 48 KiB flash budget. Export it \
+             to int8 first (about four times smaller): \
+             `magic export --model {} --out model_int8.magic`, then use model_int8.magic",
+            path.display(),
+            model.len(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
 /// The executable of the `magic-firmware` bin from cargo's JSON messages.
-fn artifact_path(json_lines: &str) -> Option<PathBuf> {
+pub fn artifact_path(json_lines: &str) -> Option<PathBuf> {
     json_lines
         .lines()
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())

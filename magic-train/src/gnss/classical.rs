@@ -1,5 +1,5 @@
 //! The classical baseline on a GNSS split (`magic classical`): every day is fitted on its own by
-//! nonlinear least squares ([`magic_core::lsq`]: Levenberg–Marquardt with the exact Jacobian,
+//! nonlinear least squares ([`crate::lsq`]: Levenberg–Marquardt with the exact Jacobian,
 //! multi-start from a coarse grid over the bounds), with no encoder and no correction.
 //!
 //! This is the best any per-day Mogi inversion (model B) can do on the paper's metric: the MSE it
@@ -7,6 +7,7 @@
 //! the table. Whether the fitted sources are plausible is a separate question, reported as the
 //! share of days with a shallow, moderate source and, for the test period, the 2008 inflation.
 
+use super::lsq::{self, Grid, Options, Problem};
 use super::plausibility::plausible;
 use super::{effect_bounds, GnssProblem};
 use crate::data::{day_number, SplitName};
@@ -15,7 +16,6 @@ use crate::numerics::median;
 use crate::problem::Metric;
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::effects::{mogi_with_effects, Effect};
-use magic_core::lsq::{self, Grid, Options, Problem};
 use magic_core::mogi::PARAM_NAMES;
 use rayon::prelude::*;
 use serde::Serialize;

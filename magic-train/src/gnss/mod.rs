@@ -8,6 +8,7 @@ pub mod classical;
 pub mod data;
 pub mod families;
 pub mod geodesy;
+pub mod lsq;
 pub mod missing;
 pub mod physics;
 pub mod plausibility;
@@ -265,11 +266,12 @@ impl Problem for GnssProblem {
         let r = classical::fit_split(self, SplitName::Test, effects)?;
         Ok(classical::metrics(&r))
     }
-    fn default_held(&self, fit: SplitName) -> Vec<SplitName> {
-        SplitName::ALL.into_iter().filter(|s| *s != fit).collect()
+    /// The whole record: an effect confined to any period is looked for where it is.
+    fn default_splits(&self) -> Vec<SplitName> {
+        SplitName::ALL.to_vec()
     }
     fn residuals(&self, model: &Model<'_>, opts: &AnalysisOptions) -> Result<GnssResiduals> {
-        residuals::residuals(self, model, opts.split, &opts.held_splits(self))
+        residuals::residuals(self, model, &opts.splits_for(self))
     }
     fn families(&self) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
         families::all()

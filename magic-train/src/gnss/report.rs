@@ -9,6 +9,12 @@ use anyhow::{Context, Result};
 use magic_core::{invert_at, Model, Workspace};
 use std::path::Path;
 
+/// The analysed splits as a label.
+fn splits(a: &Analysis) -> String {
+    let s: Vec<&str> = a.splits.iter().map(|s| s.as_str()).collect();
+    s.join(" + ")
+}
+
 /// Stations as the map plots take them: name, east, north (km).
 fn stations(res_or_net: &super::Network) -> Vec<(String, f64, f64)> {
     res_or_net
@@ -39,7 +45,7 @@ pub fn analysis_plots(res: &GnssResiduals, a: &Analysis, dir: &Path) -> Result<(
         &dir.join("effects.png"),
         &format!(
             "Residual variance explained on held-out data, % ({}; tick: chance, *: significant)",
-            a.split
+            splits(a)
         ),
         &a.effects,
     )?;
@@ -59,7 +65,10 @@ pub fn analysis_plots(res: &GnssResiduals, a: &Analysis, dir: &Path) -> Result<(
     let rms = triples(&a.residuals["station_rms_mm"]);
     plots::station_map(
         &dir.join("residual_rms.png"),
-        &format!("Residual RMS per station, mm ({}, all components)", a.split),
+        &format!(
+            "Residual RMS per station, mm ({}, all components)",
+            splits(a)
+        ),
         &st,
         &[],
         &rms.iter()

@@ -65,27 +65,22 @@ pub struct Context {
     /// Orthonormal basis (standardised units) of the directions F can already produce by
     /// adjusting its variables around their typical values.
     pub tangent: Vec<Vec<f64>>,
-    /// Sum of squares of the analysed split's (real) residuals: the denominator of the latent
+    /// Sum of squares of the analysed days' (real) residuals: the denominator of the latent
     /// families' shares, for the data and its surrogates alike.
     pub total_fit: f64,
-    /// The other splits, with the analysed split's channel means removed.
-    pub held: Block,
-    /// Whether the held-out block is large enough to score on (else the fitted families are
-    /// scored within the analysed split only).
-    pub has_held: bool,
-    /// The analysed split.
-    pub split: SplitName,
+    /// The analysed splits.
+    pub splits: Vec<SplitName>,
     /// Cached second-source search grid and its projected patterns.
     pub(crate) source_grid: OnceLock<SourceGrid>,
 }
 
-/// Residuals of a model on a dataset: the analysed split (which surrogates replace) and the
-/// shared [`Context`].
+/// Residuals of a model on a dataset: the analysed days in time order (which surrogates
+/// replace) and the shared [`Context`].
 #[derive(Clone, Debug)]
 pub struct GnssResiduals {
     /// What every family shares.
     pub ctx: Arc<Context>,
-    /// The analysed split, with each channel's mean over it removed.
+    /// The analysed days in time order, with each channel's mean over them removed.
     pub fit: Block,
 }
 
@@ -124,11 +119,6 @@ impl GnssResiduals {
         }
     }
 
-    /// The held-out block when large enough to score on.
-    pub fn held(&self) -> Option<&Block> {
-        self.ctx.has_held.then_some(&self.ctx.held)
-    }
-
     /// The report's view of the residuals (JSON) and its summary line.
     pub fn describe(&self) -> (serde_json::Value, String) {
         let (nc, ns) = (self.nc(), self.ns());
@@ -147,22 +137,19 @@ impl GnssResiduals {
                 })
             })
             .collect();
-        let held_days = if self.ctx.has_held {
-            self.ctx.held.days.len()
-        } else {
-            0
-        };
         let variance = self.ctx.total_fit / self.fit.r.len().max(1) as f64;
         let m = self.ctx.main_source;
+        let splits: Vec<&str> = self.ctx.splits.iter().map(|s| s.as_str()).collect();
         let summary = format!(
-            "residuals on {} ({t_n} days, {held_days} held-out days): variance {variance:.4} (standardised, means removed), physics-only MSE {:.4}",
-            self.ctx.split, self.ctx.mse
+            "residuals on {} ({t_n} days): variance {variance:.4} (standardised, means removed), physics-only MSE {:.4}",
+            splits.join(" + "),
+            self.ctx.mse
         );
         let json = json!({
             "residual_variance": variance,
             "residual_mse": self.ctx.mse,
             "n_days": t_n,
-            "n_heldout_days": held_days,
+            "splits": self.ctx.splits,
             "main_source": {"x_km": m[0], "y_km": m[1], "depth_km": m[2]},
             "station_rms_mm": station_rms_mm,
             "pattern_mm": pattern_mm,
@@ -217,13 +204,12 @@ fn invert_split(
     Ok((days, rows))
 }
 
-/// Residuals (observation − F(E(x)), standardised) of every day of `split` and of the `held`
-/// splits, with the tangent space of F at the main source's typical position.
+/// Residuals (observation − F(E(x)), standardised) of every day of `splits`, in time order, with
+/// the tangent space of F at the main source's typical position.
 pub fn residuals(
     p: &GnssProblem,
     model: &Model<'_>,
-    split: SplitName,
-    held_splits: &[SplitName],
+    splits: &[SplitName],
 ) -> Result<GnssResiduals> {
     let nc = p.data.n_obs();
     if model.n_obs() != nc {
@@ -232,73 +218,69 @@ pub fn residuals(
     if nc != 3 * p.network.len() {
         bail!("expected 3 channels per station");
     }
-    if p.data.split(split).len() < MIN_DAYS {
+    let np = model.n_params();
+    let (mut days, mut rows) = (Vec::new(), Vec::new());
+    for &s in splits {
+        let (d, r) = invert_split(p, model, s)?;
+        days.extend(d);
+        rows.extend(r);
+    }
+    if days.len() < MIN_DAYS {
         bail!(
-            "split {split}: {} days are too few for the analysis (at least {MIN_DAYS})",
-            p.data.split(split).len()
+            "{} days are too few for the analysis (at least {MIN_DAYS})",
+            days.len()
         );
     }
-    let np = model.n_params();
-    let (fit_days, fit_rows) = invert_split(p, model, split)?;
+    let mut order: Vec<usize> = (0..days.len()).collect();
+    order.sort_by(|&a, &b| days[a].total_cmp(&days[b]));
+    let days: Vec<f64> = order.iter().map(|&i| days[i]).collect();
+    let mut slots: Vec<Option<Day>> = rows.into_iter().map(Some).collect();
+    let rows: Vec<Day> = order.iter().filter_map(|&i| slots[i].take()).collect();
     let main = main_source(
-        &fit_rows
+        &rows
             .iter()
             .map(|d| [d.params[0], d.params[1], d.params[2], d.params[3]])
             .collect::<Vec<_>>(),
     );
-    let tangent = tangent_basis(model, &p.data.scale, main, fit_days[fit_days.len() / 2])?;
     let scale = &p.data.scale;
-    let mse = fit_rows
+    let tangent = tangent_basis(model, scale, main, days[days.len() / 2])?;
+    let mse = rows
         .iter()
         .flat_map(|d| (0..nc).map(move |c| ((d.obs[c] - d.physics[c]) / scale[c]).powi(2)))
         .sum::<f64>()
-        / (fit_rows.len() * nc) as f64;
+        / (rows.len() * nc) as f64;
     // Observations less F's time-dependent effects (F with the source's volume and the latent
     // effects at zero), standardised and projected off F's Jacobian.
     let mut p0 = vec![0.0; np];
     p0[..3].copy_from_slice(&main);
-    let block = |days: Vec<f64>, rows: &[Day]| -> Result<Block> {
-        let r: Vec<Vec<f64>> = rows
-            .par_iter()
-            .zip(days.par_iter())
-            .map(|(d, t)| {
-                let mut f = vec![0.0; nc];
-                magic_core::invert::forward(model, &p0, *t, &mut f)
-                    .map_err(|e| anyhow!("day {t}: {e}"))?;
-                let row: Vec<f64> = (0..nc).map(|c| (d.obs[c] - f[c]) / scale[c]).collect();
-                Ok(project(&tangent, &row))
-            })
-            .collect::<Result<_>>()?;
-        Ok(Block {
-            days,
-            r: r.concat(),
+    let r: Vec<Vec<f64>> = rows
+        .par_iter()
+        .zip(days.par_iter())
+        .map(|(d, t)| {
+            let mut f = vec![0.0; nc];
+            magic_core::invert::forward(model, &p0, *t, &mut f)
+                .map_err(|e| anyhow!("day {t}: {e}"))?;
+            let row: Vec<f64> = (0..nc).map(|c| (d.obs[c] - f[c]) / scale[c]).collect();
+            Ok(project(&tangent, &row))
         })
+        .collect::<Result<_>>()?;
+    let mut fit = Block {
+        days,
+        r: r.concat(),
     };
-    let mut fit = block(fit_days, &fit_rows)?;
-    let mut held = Block::default();
-    for &name in held_splits {
-        let (days, rows) = invert_split(p, model, name)?;
-        let b = block(days, &rows)?;
-        held.days.extend(b.days);
-        held.r.extend(b.r);
-    }
     let t_n = fit.len(nc);
     let mut mean = vec![0.0; nc];
     for row in fit.r.chunks(nc) {
         for (m, v) in mean.iter_mut().zip(row) {
-            *m += v;
+            *m += v / t_n as f64;
         }
     }
-    mean.iter_mut().for_each(|m| *m /= t_n as f64);
-    for b in [&mut fit, &mut held] {
-        for row in b.r.chunks_mut(nc) {
-            for (v, m) in row.iter_mut().zip(&mean) {
-                *v -= m;
-            }
+    for row in fit.r.chunks_mut(nc) {
+        for (v, m) in row.iter_mut().zip(&mean) {
+            *v -= m;
         }
     }
     let total_fit = fit.r.iter().map(|v| v * v).sum();
-    let has_held = held.days.len() >= 30;
     Ok(GnssResiduals {
         ctx: Arc::new(Context {
             network: p.network.clone(),
@@ -308,9 +290,7 @@ pub fn residuals(
             main_source: main,
             tangent,
             total_fit,
-            held,
-            has_held,
-            split,
+            splits: splits.to_vec(),
             source_grid: OnceLock::new(),
         }),
         fit,

@@ -186,21 +186,16 @@ impl Problem for RtmProblem {
             _ => Ok(vec![]),
         }
     }
-    fn default_held(&self, fit: SplitName) -> Vec<SplitName> {
-        vec![match fit {
-            SplitName::Train => SplitName::Valid,
-            SplitName::Valid | SplitName::Test => SplitName::Test,
-        }]
+    /// Fitted on the training sites, scored on the validation sites.
+    fn default_splits(&self) -> Vec<SplitName> {
+        vec![SplitName::Train, SplitName::Valid]
     }
     fn residuals(&self, model: &Model<'_>, opts: &AnalysisOptions) -> Result<SpectraResiduals> {
-        let held = opts.held_splits(self);
-        let Some(&h) = held.first() else {
-            bail!(
-                "the forest-spectra analysis needs a held-out split other than {}",
-                opts.split
-            );
+        let splits = opts.splits_for(self);
+        let [fit, held, ..] = splits[..] else {
+            bail!("the forest-spectra analysis fits on one split and scores on another: name two");
         };
-        residuals::residuals(self, model, opts.split, h)
+        residuals::residuals(self, model, fit, held)
     }
     fn families(&self) -> Vec<Box<dyn DynFamily<SpectraResiduals>>> {
         families::all()

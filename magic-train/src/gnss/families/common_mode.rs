@@ -34,6 +34,18 @@ pub fn patterns(res: &GnssResiduals) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The RMS (mm) of the persistent part of each component's daily network mean.
+fn rms_mm(res: &GnssResiduals) -> Vec<f64> {
+    patterns(res)
+        .iter()
+        .map(|g| {
+            // g is 1/scale on the component: the amplitude is the weighted network mean in mm.
+            let a = latent::daily_amplitude(&res.fit.r, res.nc(), g);
+            latent::persistent_var(&a).max(0.0).sqrt()
+        })
+        .collect()
+}
+
 impl Family<GnssResiduals> for CommonMode {
     type Fit = LatentFit;
 
@@ -56,17 +68,26 @@ impl Family<GnssResiduals> for CommonMode {
     }
     /// The RMS (mm) of the persistent part of each component's daily network mean.
     fn params(&self, res: &GnssResiduals, fit: &LatentFit) -> serde_json::Value {
-        let rms: Vec<f64> = patterns(res)
-            .iter()
-            .map(|g| {
-                // g is 1/scale on the component: the amplitude is the weighted network mean in mm.
-                let a = latent::daily_amplitude(&res.fit.r, res.nc(), g);
-                round3(latent::persistent_var(&a).max(0.0).sqrt())
-            })
-            .collect();
+        let rms: Vec<f64> = rms_mm(res).iter().map(|v| round3(*v)).collect();
         json!({"rms_mm": rms, "neighbour_days": fit.window})
     }
     fn declare(&self, res: &GnssResiduals, _: &LatentFit) -> Option<OwnedEffect> {
         (!latent::declared(&patterns(res))).then_some(OwnedEffect::CommonMode)
+    }
+    fn key_params(&self, res: &GnssResiduals, _: &LatentFit) -> Vec<(&'static str, f64)> {
+        let rms = rms_mm(res);
+        vec![
+            ("rms_e_mm", rms[0]),
+            ("rms_n_mm", rms[1]),
+            ("rms_u_mm", rms[2]),
+        ]
+    }
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        _: &LatentFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
+        Some(Ok(latent::resample(res, &patterns(res), rng)))
     }
 }

@@ -1,9 +1,9 @@
 //! What the dated families (per-channel functions of the date with fitted constants: seasonal
 //! terms, a step, a drift) share: cross-validation over [`FOLDS`] contiguous blocks of the
-//! analysed split (fitted without a block, scored on it), plus the fit on the whole split scored
-//! on the held-out splits; and phase-randomised surrogates of the residuals with the fit removed
-//! (one random phase per frequency shared by all channels, so spectra and cross-spectra are
-//! kept).
+//! analysed record (fitted without a block, scored on it: an effect confined to any period is
+//! judged on the days it holds), and phase-randomised surrogates of the residuals with the fit
+//! removed (one random phase per frequency shared by all channels, so spectra and cross-spectra
+//! are kept).
 
 use crate::analysis::score::weighted_gain;
 use crate::analysis::surrogate::PhaseSurrogates;
@@ -88,16 +88,10 @@ fn ab_on(block: &Block, nc: usize, f: &dyn TimeFit, level: &[f64]) -> (f64, f64,
     (a, b, v)
 }
 
-/// Cross-validated score of a dated family: fitted on the split without each of [`FOLDS`]
-/// contiguous blocks and scored on the block left out, and fitted on the whole split and scored
-/// on the held-out days. Returns the share of the variance of all the scored days explained by
-/// the predictions, scaled by one least-squares weight.
-pub fn cv_score<F: TimeFit>(
-    fit: &Block,
-    held: Option<&Block>,
-    nc: usize,
-    refit: &dyn Fn(&Block) -> F,
-) -> f64 {
+/// Cross-validated score of a dated family: fitted on the record without each of [`FOLDS`]
+/// contiguous blocks and scored on the block left out. Returns the share of the variance of the
+/// scored days explained by the predictions, scaled by one least-squares weight.
+pub fn cv_score<F: TimeFit>(fit: &Block, nc: usize, refit: &dyn Fn(&Block) -> F) -> f64 {
     let t_n = fit.days.len();
     let (mut a, mut b, mut v) = (0.0, 0.0, 0.0);
     for j in 0..FOLDS {
@@ -130,13 +124,6 @@ pub fn cv_score<F: TimeFit>(
         b += db;
         v += dv;
     }
-    if let Some(h) = held {
-        let f = refit(fit);
-        let (da, db, dv) = ab_on(h, nc, &f, &vec![0.0; nc]);
-        a += da;
-        b += db;
-        v += dv;
-    }
     weighted_gain((a, b)) / v
 }
 
@@ -144,8 +131,25 @@ pub fn cv_score<F: TimeFit>(
 pub fn fit_scored<F: TimeFit>(res: &GnssResiduals, refit: &dyn Fn(&Block) -> F) -> Scored<F> {
     Scored {
         fit: refit(&res.fit),
-        score: cv_score(&res.fit, res.held(), res.nc(), refit),
+        score: cv_score(&res.fit, res.nc(), refit),
     }
+}
+
+/// A dated family's bootstrap draw: its fit kept, the rest phase-randomised as for the
+/// surrogates and added back.
+pub fn resample(res: &GnssResiduals, f: &dyn TimeFit, rng: &mut StdRng) -> GnssResiduals {
+    let nc = res.nc();
+    let mut noise = res.fit.r.clone();
+    let mut effect = vec![0.0; noise.len()];
+    for (t, &d) in res.fit.days.iter().enumerate() {
+        for c in 0..nc {
+            let p = f.predict(c, d);
+            noise[t * nc + c] -= p;
+            effect[t * nc + c] = p;
+        }
+    }
+    let noise = PhaseSurrogates::new(&noise, nc).draw(rng);
+    res.with_fit(noise.iter().zip(&effect).map(|(n, e)| n + e).collect())
 }
 
 /// A dated family's surrogate: its fit removed, the rest phase-randomised.

@@ -66,7 +66,7 @@ fn fit_block(b: &Block, scale: &[f64], ns: usize, tangent: &[Vec<f64>]) -> Drift
         }
     }
     let chans: Vec<usize> = (0..ns)
-        .filter(|&i| z2[i] > DRIFT_Z2)
+        .filter(|&i| z2[i] > DRIFT_Z2 && ramp_beats_step(b, nc, ns, i))
         .flat_map(|i| (0..nk).map(move |k| k * ns + i))
         .collect();
     let d: Vec<f64> = chans.iter().map(|&c| coef[c][1]).collect();
@@ -82,6 +82,56 @@ fn fit_block(b: &Block, scale: &[f64], ns: usize, tangent: &[Vec<f64>]) -> Drift
         rates,
         response,
     }
+}
+
+/// Whether station `i`'s channels are fitted better (least squares) by a straight line than by
+/// the best single step: a step inside a record also has an outlying rate, and is the step
+/// family's to explain, not the drift's.
+fn ramp_beats_step(b: &Block, nc: usize, ns: usize, i: usize) -> bool {
+    let t_n = b.days.len();
+    if t_n < 4 {
+        return false;
+    }
+    let chans: Vec<usize> = (0..nc / ns).map(|k| k * ns + i).collect();
+    let x: Vec<Vec<f64>> = chans
+        .iter()
+        .map(|&c| (0..t_n).map(|t| b.r[t * nc + c]).collect())
+        .collect();
+    // Straight line per channel (least squares in the day number).
+    let tm = b.days.iter().sum::<f64>() / t_n as f64;
+    let stt: f64 = b.days.iter().map(|d| (d - tm).powi(2)).sum();
+    let ss_ramp: f64 = x
+        .iter()
+        .map(|v| {
+            let m = v.iter().sum::<f64>() / t_n as f64;
+            let sxt: f64 = v.iter().zip(&b.days).map(|(a, d)| (a - m) * (d - tm)).sum();
+            let sxx: f64 = v.iter().map(|a| (a - m).powi(2)).sum();
+            sxx - if stt > 0.0 { sxt * sxt / stt } else { 0.0 }
+        })
+        .sum();
+    // Best single step shared by the channels: two levels, before and after the epoch.
+    let pre: Vec<Vec<f64>> = x
+        .iter()
+        .map(|v| {
+            std::iter::once(0.0)
+                .chain(v.iter().scan(0.0, |s, a| {
+                    *s += a;
+                    Some(*s)
+                }))
+                .collect()
+        })
+        .collect();
+    let total: f64 = x.iter().flatten().map(|a| a * a).sum();
+    let ss_step = (1..t_n)
+        .map(|e| {
+            let explained: f64 = pre
+                .iter()
+                .map(|p| p[e] * p[e] / e as f64 + (p[t_n] - p[e]).powi(2) / (t_n - e) as f64)
+                .sum();
+            total - explained
+        })
+        .fold(f64::INFINITY, f64::min);
+    ss_ramp < ss_step
 }
 
 /// Drift rates (mm/yr) per channel, zero where no drift was selected.
@@ -135,5 +185,35 @@ impl Family<GnssResiduals> for Drift {
             t0_day: fit.fit.t0 as f32,
             rate: mm_per_yr(res, &fit.fit).iter().map(|v| *v as f32).collect(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Two stations × 3 components over 1 200 days of noise, with `f(t)` added to station 0.
+    fn block(f: &dyn Fn(usize) -> f64) -> Block {
+        let (ns, nc, t_n) = (2usize, 6usize, 1200usize);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let mut r: Vec<f64> = (0..t_n * nc).map(|_| rng.random_range(-0.5..0.5)).collect();
+        for t in 0..t_n {
+            for k in 0..3 {
+                r[t * nc + k * ns] += f(t);
+            }
+        }
+        Block {
+            days: (0..t_n).map(|t| 14_000.0 + t as f64).collect(),
+            r,
+        }
+    }
+
+    #[test]
+    fn a_step_is_not_a_drift_and_a_ramp_is() {
+        let step = block(&|t| if t >= 500 { 2.0 } else { 0.0 });
+        assert!(!ramp_beats_step(&step, 6, 2, 0));
+        let ramp = block(&|t| 3.0 * t as f64 / 1200.0);
+        assert!(ramp_beats_step(&ramp, 6, 2, 0));
     }
 }

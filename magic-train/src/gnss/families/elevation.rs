@@ -75,6 +75,18 @@ impl Family<GnssResiduals> for Elevation {
         let s2 = a.iter().map(|v| v * v).sum::<f64>() / t_n;
         json!({"mm_per_km": round3((s2 - noise).max(0.0).sqrt()), "z_ref_km": z_ref, "neighbour_days": fit.window})
     }
+    fn key_params(&self, res: &GnssResiduals, fit: &LatentFit) -> Vec<(&'static str, f64)> {
+        let p = self.params(res, fit);
+        vec![("mm_per_km", p["mm_per_km"].as_f64().unwrap_or(f64::NAN))]
+    }
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        _: &LatentFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
+        Some(Ok(latent::resample(res, &[pattern(res)], rng)))
+    }
     fn declare(&self, res: &GnssResiduals, _: &LatentFit) -> Option<OwnedEffect> {
         (!latent::declared(&[pattern(res)])).then(|| OwnedEffect::Elevation {
             z_ref_km: res.ctx.network.mean_elevation() as f32,

@@ -219,6 +219,25 @@ pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -
     res.with_fit(res.project_rows(&r))
 }
 
+/// A latent family's bootstrap draw: the daily fits of `patterns` kept, the rest randomised as
+/// for the surrogates ([`surrogate`]) and added back.
+pub fn resample(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
+    let nc = res.nc();
+    let mut noise = res.fit.r.clone();
+    let mut effect = vec![0.0; noise.len()];
+    for g in patterns {
+        let a = daily_amplitude(&noise, nc, g);
+        for ((row, e), at) in noise.chunks_mut(nc).zip(effect.chunks_mut(nc)).zip(&a) {
+            for c in 0..nc {
+                row[c] -= at * g[c];
+                e[c] += at * g[c];
+            }
+        }
+    }
+    let noise = res.project_rows(&flip_reverse(&noise, nc, res.ns(), rng));
+    res.with_fit(noise.iter().zip(&effect).map(|(n, e)| n + e).collect())
+}
+
 /// Whether every pattern projects to (numerically) nothing: F already produces it.
 pub fn declared(patterns: &[Vec<f64>]) -> bool {
     patterns

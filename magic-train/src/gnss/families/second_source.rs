@@ -1,7 +1,9 @@
 //! `second_source`: a second Mogi point source at a fixed position whose volume changes day by
-//! day — another reservoir, a hydrothermal system. Latent: declared, it adds one variable (its
-//! ΔV) the encoder infers every day. The position is found by a grid search over the network
-//! (± 1 km, depths 3–15 km) away from the main source, refined locally.
+//! day — another reservoir, a hydrothermal system, a lasting deflation. Latent: declared, it adds
+//! one variable (its ΔV) the encoder infers every day. The position is found by a grid search over
+//! the network's box widened by [`GRID_MARGIN_KM`] (depths 2–20 km) away from the main source,
+//! refined locally. A position on the bound of the grid is not a discovery: a far, deep source
+//! imitates a network-wide signal, and the search runs to the edge after it.
 
 use super::latent::{self, round3, Cross};
 use crate::analysis::Family;
@@ -19,6 +21,14 @@ use serde_json::json;
 pub const MAIN_SOURCE_EXCLUSION_KM: f64 = 3.0;
 /// Candidates refined in the search.
 const SOURCE_CANDIDATES: usize = 6;
+/// How far (km) the search grid reaches beyond the stations' box.
+pub const GRID_MARGIN_KM: f64 = 3.0;
+/// Depths (km) of the search grid.
+pub const GRID_DEPTHS: [f64; 13] = [
+    2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0,
+];
+/// A refined position closer than this (km) to a face of the grid's box sits on its bound.
+pub const BOUND_TOLERANCE_KM: f64 = 0.25;
 
 /// The second-source family.
 pub struct SecondSource;
@@ -48,10 +58,9 @@ pub fn pattern(res: &GnssResiduals, p: [f64; 3]) -> Vec<f64> {
     )
 }
 
-/// The search grid (x, y over the network ± 1 km at 1 km spacing, depths 3–15 km: a shallower
-/// source is seen by one station only, indistinguishable from that station's own noise), without
-/// the neighbourhood of the main source, with the projected pattern of each point (computed once
-/// per set of residuals: surrogates share it).
+/// The search grid (x, y over the network ± [`GRID_MARGIN_KM`] at 1 km spacing, depths
+/// [`GRID_DEPTHS`]), without the neighbourhood of the main source, with the projected pattern of
+/// each point (computed once per set of residuals: surrogates share it).
 fn grid(res: &GnssResiduals) -> &crate::gnss::residuals::SourceGrid {
     res.ctx.source_grid.get_or_init(|| {
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
@@ -62,14 +71,13 @@ fn grid(res: &GnssResiduals) -> &crate::gnss::residuals::SourceGrid {
             y1 = y1.max(s.y_km);
         }
         let main = res.ctx.main_source;
-        let depths = [3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0];
         let mut pts = Vec::new();
-        let mut x = (x0 - 1.0).floor();
-        while x <= x1 + 1.0 {
-            let mut y = (y0 - 1.0).floor();
-            while y <= y1 + 1.0 {
+        let mut x = (x0 - GRID_MARGIN_KM).floor();
+        while x <= x1 + GRID_MARGIN_KM {
+            let mut y = (y0 - GRID_MARGIN_KM).floor();
+            while y <= y1 + GRID_MARGIN_KM {
                 if (x - main[0]).hypot(y - main[1]) >= MAIN_SOURCE_EXCLUSION_KM {
-                    for d in depths {
+                    for d in GRID_DEPTHS {
                         pts.push([x, y, d]);
                     }
                 }
@@ -82,6 +90,17 @@ fn grid(res: &GnssResiduals) -> &crate::gnss::residuals::SourceGrid {
     })
 }
 
+/// The grid's box: lowest and highest x, y, depth.
+fn bounding_box(pts: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    pts.iter()
+        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
+            (
+                core::array::from_fn(|k| lo[k].min(p[k])),
+                core::array::from_fn(|k| hi[k].max(p[k])),
+            )
+        })
+}
+
 /// Local pattern search of a position maximising `score`, from `best`, inside the grid's box
 /// and outside the main source's neighbourhood.
 fn refine(
@@ -91,14 +110,7 @@ fn refine(
     mut bg: f64,
     score: &dyn Fn(&[f64]) -> f64,
 ) -> ([f64; 3], f64) {
-    let (lo, hi) = pts
-        .iter()
-        .fold(([f64::MAX; 3], [f64::MIN; 3]), |(lo, hi), p| {
-            (
-                core::array::from_fn(|k| lo[k].min(p[k])),
-                core::array::from_fn(|k| hi[k].max(p[k])),
-            )
-        });
+    let (lo, hi) = bounding_box(pts);
     let main = res.ctx.main_source;
     let allowed = |p: &[f64; 3]| {
         (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k])
@@ -240,6 +252,35 @@ impl Family<GnssResiduals> for SecondSource {
             "peak_dv_1e6m3": (peak * 1e4).round() / 1e4,
             "neighbour_days": fit.window,
         })
+    }
+    fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<String> {
+        let (lo, hi) = bounding_box(&grid(res).0);
+        let names = ["x", "y", "depth"];
+        (0..3)
+            .find(|&k| {
+                fit.pos[k] - lo[k] < BOUND_TOLERANCE_KM || hi[k] - fit.pos[k] < BOUND_TOLERANCE_KM
+            })
+            .map(|k| {
+                format!(
+                    "on the bound of the search grid ({} {:.1} km in [{:.1}, {:.1}])",
+                    names[k], fit.pos[k], lo[k], hi[k]
+                )
+            })
+    }
+    fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
+        vec![
+            ("x_km", fit.pos[0]),
+            ("y_km", fit.pos[1]),
+            ("depth_km", fit.pos[2]),
+        ]
+    }
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        fit: &SourceFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
+        Some(Ok(latent::resample(res, &[pattern(res, fit.pos)], rng)))
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {
         (fit.score > 0.0).then_some(OwnedEffect::SecondSource {

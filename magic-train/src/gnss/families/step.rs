@@ -131,6 +131,10 @@ impl Family<GnssResiduals> for Step {
         Ok(dated::surrogate(res, &fit.fit, rng))
     }
     /// Station, epoch, offset (mm, E N U) and the scan statistic.
+    /// The scan statistic: a step's local jump must stand out of the noise's.
+    fn statistic(&self, fit: &Self::Fit) -> Option<f64> {
+        Some(fit.fit.stat)
+    }
     fn params(&self, res: &GnssResiduals, fit: &Self::Fit) -> serde_json::Value {
         let (ns, f) = (res.ns(), &fit.fit);
         json!({
@@ -139,6 +143,24 @@ impl Family<GnssResiduals> for Step {
             "offset_mm": (0..3).map(|k| round3(f.offset[k] * res.ctx.scale[k * ns + f.station])).collect::<Vec<_>>(),
             "scan_statistic": round3(f.stat),
         })
+    }
+    fn key_params(&self, res: &GnssResiduals, fit: &Self::Fit) -> Vec<(&'static str, f64)> {
+        let (ns, f) = (res.ns(), &fit.fit);
+        let mm = |k: usize| f.offset[k] * res.ctx.scale[k * ns + f.station];
+        vec![
+            ("epoch_day", f.epoch),
+            ("offset_e_mm", mm(0)),
+            ("offset_n_mm", mm(1)),
+            ("offset_u_mm", mm(2)),
+        ]
+    }
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        fit: &Self::Fit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
+        Some(Ok(dated::resample(res, &fit.fit, rng)))
     }
     fn declare(&self, res: &GnssResiduals, fit: &Self::Fit) -> Option<OwnedEffect> {
         let (ns, f) = (res.ns(), &fit.fit);

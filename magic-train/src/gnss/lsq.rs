@@ -30,10 +30,10 @@
 //! No function here panics on input: wrong sizes, non-finite values, empty or inverted bounds and
 //! too few observed channels are [`Error`]s; singular normal equations are damped.
 
-use crate::effects::{mogi_with_effects, Effect};
-use crate::model_file::MAX_OBS;
-use crate::mogi::{self, Station};
-use crate::{Dual, Error};
+use magic_core::effects::{mogi_with_effects, Effect};
+use magic_core::model_file::MAX_OBS;
+use magic_core::mogi::{self, Station};
+use magic_core::{Dual, Error};
 use nalgebra::{SMatrix, SVector};
 
 /// Largest number of unknowns (4 source parameters plus the effects' latent variables).
@@ -258,7 +258,7 @@ pub fn fit(
 /// by Levenberg–Marquardt and returns the fit with the lowest cost.
 ///
 /// ```
-/// use magic_core::lsq::{fit_grid, Grid, Options, Problem};
+/// use magic_train::lsq::{fit_grid, Grid, Options, Problem};
 /// use magic_core::mogi::{field, Station, PAPER_BOUNDS};
 /// let stations: [Station; 4] = core::array::from_fn(|i| Station {
 ///     x_km: [-5.0, 6.0, 1.0, 9.0][i], y_km: [3.0, -2.0, 6.0, 1.0][i], z_km: 0.0,
@@ -552,9 +552,9 @@ fn levenberg_marquardt(
                 (p[j] <= lo && lin.g[j] > 0.0) || (p[j] >= hi && lin.g[j] < 0.0) || lo == hi;
             free[j] = !blocked;
             if free[j] {
-                let denom = libm::sqrt(lin.jtj[(j, j)] * lin.cost);
+                let denom = (lin.jtj[(j, j)] * lin.cost).sqrt();
                 if denom > 0.0 {
-                    gmax = gmax.max(libm::fabs(lin.g[j]) / denom);
+                    gmax = gmax.max(lin.g[j].abs() / denom);
                 }
             }
         }
@@ -575,9 +575,8 @@ fn levenberg_marquardt(
             if let Some(q) = trial {
                 let c = sum_sq(pb, obs, t_day, &q, n);
                 if c < lin.cost {
-                    let small_step = (0..n).all(|j| {
-                        libm::fabs(q[j] - p[j]) <= opts.xtol * (libm::fabs(p[j]) + opts.xtol)
-                    });
+                    let small_step =
+                        (0..n).all(|j| (q[j] - p[j]).abs() <= opts.xtol * (p[j].abs() + opts.xtol));
                     let small_gain = lin.cost - c <= opts.ftol * lin.cost;
                     p = q;
                     lin = linearise(pb, obs, t_day, &p, n)?;
@@ -614,7 +613,7 @@ fn levenberg_marquardt(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mogi::PAPER_BOUNDS;
+    use magic_core::mogi::PAPER_BOUNDS;
 
     /// The Akutan network (km), rounded from the data's `stations.json`.
     const NET: [Station; 12] = [
@@ -862,7 +861,7 @@ mod tests {
     }
 
     #[test]
-    fn degenerate_inputs_are_errors() {
+    fn wrong_sizes_and_non_finite_inputs_are_errors() {
         let sc = [1.0; 36];
         let y = synth(&[], &[1.0, 1.0, 6.0, 1.0]);
         let pb = Problem {
@@ -920,6 +919,20 @@ mod tests {
         assert!(fit(&Problem { scale: &nsc, ..pb }, &y, f64::NAN, &start, &o).is_err());
         nsc[5] = 0.0;
         assert!(fit(&Problem { scale: &nsc, ..pb }, &y, f64::NAN, &start, &o).is_err());
+    }
+
+    #[test]
+    fn bad_bounds_sparse_data_bad_grids_and_undated_effects_are_errors() {
+        let sc = [1.0; 36];
+        let y = synth(&[], &[1.0, 1.0, 6.0, 1.0]);
+        let pb = Problem {
+            stations: &NET,
+            effects: &[],
+            bounds: &PAPER_BOUNDS,
+            scale: &sc,
+        };
+        let o = Options::default();
+        let start = [0.0, 0.0, 5.0, 0.0];
         // Bounds: inverted, non-finite, depth not positive.
         let mut b = PAPER_BOUNDS;
         b[0] = [1.0, -1.0];
@@ -970,7 +983,7 @@ mod tests {
         let rate = [0u8; 4 * 36];
         let eff = [Effect::Drift {
             t0_day: 0.0,
-            rate: crate::quant::LeF32(&rate),
+            rate: magic_core::quant::LeF32(&rate),
         }];
         assert!(fit(
             &Problem {

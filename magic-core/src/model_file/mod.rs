@@ -19,12 +19,14 @@
 //! place in its chain does not use (weight scales of requantised layers, multipliers and shifts
 //! of dequantised ones).
 
+mod validate;
+
 use crate::effects::{Effect, MAX_EFFECTS};
-use crate::mogi::{self, Stations};
-use crate::nn::{validate_chain, Activation, Layer, MAX_LAYERS};
+use crate::mogi::Stations;
+use crate::nn::{Layer, MAX_LAYERS};
 use crate::quant::LeF32;
 use crate::rtm::bands::Packed;
-use crate::rtm::{Fixed, Geometry, N_BANDS, N_LEARNED};
+use crate::rtm::{Fixed, Geometry, N_BANDS};
 use crate::Error;
 use serde::{Deserialize, Serialize};
 
@@ -359,7 +361,11 @@ impl<'a> Model<'a> {
             return Err(Error::Truncated);
         }
         if bytes.len() > total {
-            return Err(Error::InvalidModel("trailing bytes after the CRC"));
+            return Err(Error::SizeMismatch {
+                what: "model file bytes",
+                expected: total,
+                found: bytes.len(),
+            });
         }
         let (Some(content), Some(&[c0, c1, c2, c3])) = (bytes.get(..end), bytes.get(end..total))
         else {
@@ -389,199 +395,6 @@ impl<'a> Model<'a> {
         decode_seq(&mut de, &mut self.effects)?;
         if !de.finalize()?.is_empty() {
             return Err(postcard::Error::DeserializeBadEncoding);
-        }
-        Ok(())
-    }
-
-    /// Checks every size and value against the compiled limits and against each other.
-    pub fn validate(&self) -> Result<(), Error> {
-        self.validate_for::<AnyProblem>()
-    }
-
-    /// [`Model::validate`] for a build that links only the forward models of `P`.
-    pub fn validate_for<P: Problems>(&self) -> Result<(), Error> {
-        let n_obs = self.n_obs();
-        if n_obs == 0 || n_obs > MAX_OBS || self.obs_mean.0.len() != 4 * n_obs {
-            return Err(Error::InvalidModel(
-                "observation count is zero, too large or not whole f32s",
-            ));
-        }
-        if self.obs_scale.0.len() != self.obs_mean.0.len() {
-            return Err(Error::SizeMismatch {
-                what: "obs_scale",
-                expected: n_obs,
-                found: self.obs_scale.len(),
-            });
-        }
-        if !self.obs_mean.iter().all(f32::is_finite) {
-            return Err(Error::InvalidModel("non-finite observation mean"));
-        }
-        if !self.obs_scale.iter().all(|s| s.is_finite() && s > 0.0) {
-            return Err(Error::InvalidModel(
-                "observation scale not positive and finite",
-            ));
-        }
-        if !(self.residual_threshold.is_finite() && self.residual_threshold >= 0.0) {
-            return Err(Error::InvalidModel(
-                "residual threshold not finite and non-negative",
-            ));
-        }
-        let n_phys = match &self.problem {
-            Problem::Mogi { stations, names } => {
-                if stations.0.len() % mogi::STATION_BYTES != 0 {
-                    return Err(Error::InvalidModel("station bytes are not whole stations"));
-                }
-                if names.len() != stations.len() {
-                    return Err(Error::SizeMismatch {
-                        what: "station names",
-                        expected: stations.len(),
-                        found: names.len(),
-                    });
-                }
-                if !names.well_formed() {
-                    return Err(Error::InvalidModel(
-                        "station name empty or longer than 8 bytes",
-                    ));
-                }
-                if stations.is_empty() {
-                    return Err(Error::InvalidModel("no stations"));
-                }
-                if n_obs != 3 * stations.len() {
-                    return Err(Error::SizeMismatch {
-                        what: "observations (3 per station)",
-                        expected: 3 * stations.len(),
-                        found: n_obs,
-                    });
-                }
-                if !stations
-                    .iter()
-                    .all(|s| s.x_km.is_finite() && s.y_km.is_finite() && s.z_km.is_finite())
-                {
-                    return Err(Error::InvalidModel("non-finite station position"));
-                }
-                for e in &self.effects {
-                    e.validate(stations.len())?;
-                }
-                mogi::N_PARAMS + self.effects.iter().map(|e| e.n_latent()).sum::<usize>()
-            }
-            Problem::Rtm { .. } if !P::RTM => return Err(Error::WrongProblem),
-            Problem::Rtm {
-                bands,
-                fixed,
-                geometry,
-                ..
-            } => {
-                if *bands >> N_BANDS != 0 {
-                    return Err(Error::InvalidModel("RTM band mask names bands beyond B12"));
-                }
-                if bands.count_ones() as usize != n_obs {
-                    return Err(Error::SizeMismatch {
-                        what: "observations (one per observed band)",
-                        expected: bands.count_ones() as usize,
-                        found: n_obs,
-                    });
-                }
-                let packed = self.problem.packed()?;
-                for e in &self.effects {
-                    e.validate_rtm(n_obs, *geometry)?;
-                }
-                let f = fixed;
-                let all = [
-                    f.car,
-                    f.anth,
-                    f.cbrown,
-                    f.cp,
-                    f.cbc,
-                    f.type_lidf,
-                    f.lidf,
-                    f.hspot,
-                    f.psoil,
-                    f.tts,
-                    f.tto,
-                    f.psi,
-                    f.sd,
-                ];
-                if let Some(index) = all.iter().position(|v| !v.is_finite()) {
-                    return Err(Error::NonFinite {
-                        what: "RTM fixed input",
-                        index,
-                    });
-                }
-                if self.variant != Variant::A {
-                    // The fixed inputs must be accepted by the forward model (angles, soil, LIDF
-                    // row, …): run it once at the middle of the bounds.
-                    let mut z = [0f64; N_LEARNED];
-                    for (zi, b) in z.iter_mut().zip(self.bounds.iter()) {
-                        *zi = 0.5 * (b[0] as f64 + b[1] as f64);
-                    }
-                    if self.bounds.len() == N_LEARNED
-                        && self.bounds.iter().all(|b| b[0] > 0.0 && b[0] < b[1])
-                    {
-                        let mut y = [0f64; N_BANDS];
-                        packed.forward_learned(
-                            &z,
-                            fixed,
-                            geometry_of(&self.problem),
-                            &mut y[..n_obs],
-                        )?;
-                    }
-                }
-                N_LEARNED
-            }
-        };
-        let n_params = self.n_params();
-        match self.variant {
-            Variant::A => {
-                if n_params == 0 || n_params > MAX_PARAMS {
-                    return Err(Error::InvalidModel("latent size is zero or too large"));
-                }
-                validate_chain(&self.encoder, n_obs, n_params)?;
-                validate_chain(&self.decoder, n_params, n_obs)?;
-            }
-            Variant::B | Variant::C => {
-                validate_chain(&self.encoder, n_obs, n_phys)?;
-                let head = self
-                    .encoder
-                    .last()
-                    .ok_or(Error::InvalidModel("empty encoder"))?;
-                if head.act != Activation::Sigmoid || head.is_int8() {
-                    return Err(Error::InvalidModel(
-                        "encoder head must be an f32 sigmoid layer",
-                    ));
-                }
-                if self.bounds.len() != n_phys {
-                    return Err(Error::SizeMismatch {
-                        what: "bounds",
-                        expected: n_phys,
-                        found: self.bounds.len(),
-                    });
-                }
-                if !self
-                    .bounds
-                    .iter()
-                    .all(|b| b[0].is_finite() && b[1].is_finite() && b[0] < b[1])
-                {
-                    return Err(Error::InvalidModel("bounds must be finite with min < max"));
-                }
-                if let Problem::Mogi { .. } = self.problem {
-                    if self.bounds.get(2).is_none_or(|b| b[0] <= 0.0) {
-                        return Err(Error::InvalidModel("depth bound must be positive"));
-                    }
-                }
-                if let Problem::Rtm { .. } = self.problem {
-                    if !self.bounds.iter().all(|b| b[0] > 0.0) {
-                        return Err(Error::InvalidModel("RTM variable bounds must be positive"));
-                    }
-                }
-                match self.variant {
-                    Variant::C => validate_chain(&self.decoder, n_obs, n_obs)?,
-                    _ => {
-                        if !self.decoder.is_empty() {
-                            return Err(Error::InvalidModel("variant B has no correction layers"));
-                        }
-                    }
-                }
-            }
         }
         Ok(())
     }
@@ -631,16 +444,10 @@ fn decode_seq<'de, T: Deserialize<'de>, const N: usize>(
     Ok(())
 }
 
-fn geometry_of(p: &Problem<'_>) -> Geometry {
-    match p {
-        Problem::Rtm { geometry, .. } => *geometry,
-        _ => Geometry::Reference,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mogi;
 
     #[test]
     fn names_split_on_commas() {

@@ -1,0 +1,36 @@
+//! `common_mode`: a translation of the whole network (E, N, U) wandering over weeks to months —
+//! an AR(1) with a 60-day time scale per component, RMS over the training period 1.5–3 mm
+//! horizontally and 3–6 mm vertically.
+
+use super::super::draw::{ar1, rms_about_mean, round3};
+use super::Ctx;
+use rand::rngs::StdRng;
+use rand::Rng;
+use serde_json::json;
+
+/// Adds the translation; `rms_mm` is the RMS over the training period of the whole persistent
+/// common mode the data hold (this one, plus the noise's where it has one).
+pub fn inject(ctx: &Ctx<'_>, rng: &mut StdRng, rows: &mut [Vec<f64>]) -> serde_json::Value {
+    let (ns, n_days) = (ctx.ns(), rows.len());
+    let (a, b) = ctx.train();
+    let rms = [
+        rng.random_range(1.5..3.0),
+        rng.random_range(1.5..3.0),
+        rng.random_range(3.0..6.0),
+    ];
+    let mut total = rms;
+    for (k, r) in rms.iter().enumerate() {
+        let mut v = ar1(rng, n_days, 60.0);
+        ctx.set_train_rms(&mut v, *r);
+        for (t, row) in rows.iter_mut().enumerate() {
+            for o in &mut row[k * ns..(k + 1) * ns] {
+                *o += v[t];
+            }
+        }
+        if let Some(bg) = &ctx.background.common {
+            let sum: Vec<f64> = (a..b).map(|t| v[t] + bg[k][t]).collect();
+            total[k] = rms_about_mean(&sum);
+        }
+    }
+    json!({"rms_mm": total.map(round3)})
+}
