@@ -499,3 +499,105 @@ pub fn train_model<P: Problem + ?Sized>(
     model.residual_threshold = model.residual_threshold(&data.valid)?;
     Ok((model, log))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::{Dataset, Split};
+
+    /// Agreement of the f32 losses with the same sums in f64 (24 cells of order 1).
+    const F32_SUM_TOLERANCE: f64 = 1e-5;
+
+    /// A plain autoencoder on `n` channels with identity standardisation.
+    fn net(n: usize) -> Net {
+        let data = Dataset {
+            columns: (0..n).map(|c| format!("c{c}")).collect(),
+            mean: vec![0.0; n],
+            scale: vec![1.0; n],
+            train: Split::default(),
+            valid: Split::default(),
+            test: Split::default(),
+            source: "test".into(),
+        };
+        Net::new(
+            Variant::A,
+            &data,
+            None,
+            vec![],
+            3,
+            &mut StdRng::seed_from_u64(3),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn missing_channels_are_left_out_of_the_loss_not_the_day() {
+        let n = 6;
+        let net = net(n);
+        let rows: Vec<Vec<f32>> = (0..4)
+            .map(|r| (0..n).map(|c| ((r * n + c) as f32 * 0.37).sin()).collect())
+            .collect();
+        let mut gappy = rows.clone();
+        gappy[1][2] = f32::NAN;
+        gappy[3][0] = f32::NAN;
+        gappy[3][5] = f32::NAN;
+        let days = days_tensor(&[0.0, 1.0, 2.0, 3.0]).unwrap();
+        let refs = |r: &[Vec<f32>]| r.iter().map(Vec::as_slice).collect::<Vec<_>>();
+        let (loss, cells, _) = batch_mse(&net, &refs(&gappy), n, &days).unwrap();
+        assert_eq!(cells, 4 * n - 3);
+        // By hand: the network fed the rows with the missing cells at the mean (0), the squared
+        // error summed over the observed cells only.
+        let filled: Vec<Vec<f32>> = gappy
+            .iter()
+            .map(|r| {
+                r.iter()
+                    .map(|v| if v.is_nan() { 0.0 } else { *v })
+                    .collect()
+            })
+            .collect();
+        let out = net
+            .forward(&to_tensor(&refs(&filled), n).unwrap(), &days)
+            .unwrap();
+        let recon: Vec<Vec<f32>> = out.recon.to_vec2().unwrap();
+        let (mut sq, mut k) = (0.0f64, 0usize);
+        for (r, row) in gappy.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                if !v.is_nan() {
+                    sq += ((recon[r][c] - v) as f64).powi(2);
+                    k += 1;
+                }
+            }
+        }
+        let got = loss.to_scalar::<f32>().unwrap() as f64;
+        assert!(
+            (got - sq / k as f64).abs() < F32_SUM_TOLERANCE,
+            "{got} vs {}",
+            sq / k as f64
+        );
+        // Without missing cells: the plain mean over every cell.
+        let (full, cells, _) = batch_mse(&net, &refs(&rows), n, &days).unwrap();
+        assert_eq!(cells, 4 * n);
+        let plain = mse(
+            &net.forward(&to_tensor(&refs(&rows), n).unwrap(), &days)
+                .unwrap()
+                .recon,
+            &to_tensor(&refs(&rows), n).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            full.to_scalar::<f32>().unwrap(),
+            plain.to_scalar::<f32>().unwrap()
+        );
+        // The validation MSE counts observed cells: finite on gappy rows.
+        let d = [0.0, 1.0, 2.0, 3.0];
+        let v = valid_mse(
+            &net,
+            Rows {
+                x: &gappy,
+                days: &d,
+            },
+        )
+        .unwrap();
+        assert!((v - sq / k as f64).abs() < F32_SUM_TOLERANCE, "{v}");
+    }
+}

@@ -11,10 +11,12 @@
 //! 1. `magic prepare --detrend --steps` gives the stations' local coordinates, and the listed
 //!    step and the trends are removed to within the noise, while the unlisted step is kept
 //!    whole (MIDAS does not turn it into a ramp);
-//! 2. `magic train` → `magic export` → `magic invert` on the prepared folder gives the same
-//!    sources as on the hand-made one;
+//! 2. the prepared folder has the hand-made one's layout (columns, dates of each split, source
+//!    bounds), and `magic train` → `magic export` → `magic invert` on it gives the sources the
+//!    same pipeline gives on the hand-made one (ΔV within the spread of a few epochs' training,
+//!    both following the true ΔV), with the derived bounds in the model file;
 //! 3. `magic loop` on the prepared folder traces the residuals to the unlisted step (station and
-//!    day).
+//!    day) and finds nothing else but the network's common mode and seasonal terms.
 
 use magic_core::mogi::{self, Station, PARAM_NAMES};
 use magic_tests::{magic_bin, TempDir};
@@ -318,12 +320,18 @@ fn write_hand_made(dir: &Path, net: &Network, margin_km: f64) {
 }
 
 fn magic(args: &[&str]) -> String {
+    let started = std::time::Instant::now();
     let out = Command::new(magic_bin())
         .args(args)
         .output()
         .expect("magic runs");
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "magic {}: {stderr}", args.join(" "));
+    eprintln!(
+        "magic {}: {:.1} s",
+        args[0],
+        started.elapsed().as_secs_f64()
+    );
     stderr
 }
 
@@ -373,6 +381,19 @@ fn physical(dir: &Path) -> Vec<Vec<f64>> {
     out
 }
 
+/// Pearson correlation of two series.
+fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        ab += (x - ma) * (y - mb);
+        aa += (x - ma) * (x - ma);
+        bb += (y - mb) * (y - mb);
+    }
+    ab / (aa * bb).sqrt()
+}
+
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -419,10 +440,6 @@ const DEPARTURE_MAX_NOISE: f64 = 2.5;
 #[test]
 fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
     let tmp = TempDir::new("prepare");
-    eprintln!("TMP {}", tmp.0.display());
-    let tmp = std::mem::ManuallyDrop::new(tmp);
-    eprintln!("TMP {}", tmp.0.display());
-    let tmp = std::mem::ManuallyDrop::new(tmp);
     let net = simulate(11);
     let files = tmp.join("tenv3");
     std::fs::create_dir_all(&files).unwrap();
@@ -558,22 +575,55 @@ fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
         UNLISTED.0, UNLISTED.2[0]
     );
     assert!((jump - UNLISTED.2[0]).abs() < 2.0, "{jump}");
-    let _ = ns;
+
+    // The same layout as the hand-made one: columns, dates per split, source bounds.
+    for split in ["train", "valid", "test"] {
+        let read = |d: &Path| std::fs::read_to_string(d.join(format!("{split}.csv"))).unwrap();
+        let (a, b) = (read(&prep), read(&hand));
+        // The channels and the date (prepare also writes the date's `sin_date`, `cos_date`).
+        let head = |t: &str| {
+            t.lines()
+                .next()
+                .unwrap()
+                .split(',')
+                .take(37)
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        assert_eq!(head(&a), head(&b), "{split}: columns");
+        let dates = |t: &str| {
+            t.lines()
+                .skip(1)
+                .map(|l| l.split(',').nth(36).unwrap().to_string())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(dates(&a), dates(&b), "{split}: dates");
+    }
+    let bounds = |d: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(d.join("bounds.json")).unwrap()).unwrap()
+    };
+    let (bp, bh) = (bounds(&prep), bounds(&hand));
+    for name in PARAM_NAMES {
+        for k in 0..2 {
+            let (x, y) = (bp[name][k].as_f64().unwrap(), bh[name][k].as_f64().unwrap());
+            assert!((x - y).abs() < 1e-4, "bounds {name}: {x} vs {y}");
+        }
+    }
 
     // prepare → train → export → invert, against the hand-made layout.
     let mut results = vec![];
     for (tag, dir) in [("prepared", &prep), ("hand", &hand)] {
-        let f32m = tmp.join(&format!("{tag}_C.magic"));
-        let int8 = tmp.join(&format!("{tag}_C_int8.magic"));
+        let f32m = tmp.join(&format!("{tag}_B.magic"));
+        let int8 = tmp.join(&format!("{tag}_B_int8.magic"));
         let out = tmp.join(&format!("{tag}_inv.csv"));
         let d = dir.to_str().unwrap();
         magic(&[
             "train",
             "mogi",
             "--variant",
-            "C",
+            "B",
             "--epochs",
-            "10",
+            PIPELINE_EPOCHS,
             "--seed",
             "1",
             "--data-dir",
@@ -600,6 +650,19 @@ fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
             "--output",
             out.to_str().unwrap(),
         ]);
+        // The model file carries the derived source bounds.
+        let bytes = std::fs::read(&int8).unwrap();
+        let m = magic_core::Model::decode(&bytes).unwrap();
+        for (j, name) in PARAM_NAMES.iter().enumerate() {
+            for k in 0..2 {
+                let want = bp[*name][k].as_f64().unwrap();
+                assert!(
+                    (m.bounds[j][k] as f64 - want).abs() < 1e-4,
+                    "{tag} model bounds of {name}: {:?} vs {want}",
+                    m.bounds[j]
+                );
+            }
+        }
         results.push(read_csv(&out));
     }
     let (header, a) = &results[0];
@@ -607,20 +670,100 @@ fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
     assert_eq!(a.len(), TEST_DAYS);
     assert_eq!(b.len(), TEST_DAYS);
     assert!(header.iter().any(|h| h == PARAM_NAMES[0]));
-    let hb: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(hand.join("bounds.json")).unwrap()).unwrap();
-    let mut worst = [0.0f64; 4];
+    // The sources stay inside the bounds; both pipelines follow the true ΔV alike, and their
+    // sources agree.
     let mut mean_abs = [0.0f64; 4];
     for (ra, rb) in a.iter().zip(b) {
         for j in 0..4 {
-            let range =
-                hb[PARAM_NAMES[j]][1].as_f64().unwrap() - hb[PARAM_NAMES[j]][0].as_f64().unwrap();
-            let d = (ra[j] - rb[j]).abs() / range;
-            worst[j] = worst[j].max(d);
-            mean_abs[j] += d / TEST_DAYS as f64;
+            let lo = bh[PARAM_NAMES[j]][0].as_f64().unwrap();
+            let hi = bh[PARAM_NAMES[j]][1].as_f64().unwrap();
+            for v in [ra[j], rb[j]] {
+                assert!(v >= lo - 1e-6 && v <= hi + 1e-6, "{}: {v}", PARAM_NAMES[j]);
+            }
+            mean_abs[j] += (ra[j] - rb[j]).abs() / TEST_DAYS as f64;
         }
     }
+    let true_dv: Vec<f64> = (0..TEST_DAYS).map(|t| volume(t as f64)).collect();
+    let dv = |r: &[Vec<f64>]| r.iter().map(|v| v[3]).collect::<Vec<f64>>();
+    let (corr_p, corr_h) = (correlation(&dv(a), &true_dv), correlation(&dv(b), &true_dv));
     eprintln!(
-        "prepared vs hand-made, share of each variable's range: mean {mean_abs:?}, worst {worst:?}"
+        "test split: mean |prepared − hand-made| x {:.3} km, y {:.3} km, depth {:.3} km, ΔV {:.3}·10⁶ m³; correlation of ΔV with the truth: prepared {corr_p:.3}, hand-made {corr_h:.3}",
+        mean_abs[0], mean_abs[1], mean_abs[2], mean_abs[3]
+    );
+    assert!(corr_p > DV_CORRELATION_MIN, "prepared: {corr_p}");
+    assert!(corr_h > DV_CORRELATION_MIN, "hand-made: {corr_h}");
+    assert!(mean_abs[3] < PIPELINE_DV_DIFFERENCE, "ΔV: {}", mean_abs[3]);
+
+    // `magic loop` on the prepared data: the unlisted step (station and day), and nothing else
+    // but the network's common mode and seasonal terms.
+    let report = tmp.join("loop");
+    magic(&[
+        "loop",
+        "mogi",
+        "--data-dir",
+        prep.to_str().unwrap(),
+        "--epochs",
+        LOOP_EPOCHS,
+        "--rounds",
+        "3",
+        "--surrogates",
+        LOOP_SURROGATES,
+        "--no-classical",
+        "--report",
+        report.to_str().unwrap(),
+    ]);
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report.join("report.json")).unwrap())
+            .unwrap();
+    let mut found_step = false;
+    for round in r["loop"]["rounds"].as_array().unwrap() {
+        for c in round["candidates"].as_array().unwrap() {
+            if c["significant"] != true {
+                continue;
+            }
+            let family = c["family"].as_str().unwrap();
+            eprintln!(
+                "round {}: {family} {} (explained {:.4}, chance {:.4})",
+                round["round"], c["params"], c["variance_explained"], c["chance_level"]
+            );
+            assert!(
+                ["common_mode", "seasonal", "step"].contains(&family),
+                "round {}: {family} found: {c}",
+                round["round"]
+            );
+            if family == "step" {
+                let epoch = c["params"]["epoch"].as_str().unwrap();
+                let day = magic_train::gnss::tenv3::parse_ymd(epoch).unwrap() - day0();
+                assert_eq!(c["params"]["station"], UNLISTED.0, "{c}");
+                assert!(
+                    (day - UNLISTED.1 as i64).abs() <= STEP_DAY_TOLERANCE,
+                    "step on {epoch}, injected on {}",
+                    date(UNLISTED.1, '-')
+                );
+                found_step = true;
+            }
+        }
+    }
+    assert!(
+        found_step,
+        "the unlisted step was not found: {}",
+        r["loop"]["stop"]
     );
 }
+
+/// Epochs of the B models trained on the prepared and the hand-made layouts. B: the source is
+/// F's alone (a C model's correction may absorb it, and at a few epochs here mirrors ΔV).
+const PIPELINE_EPOCHS: &str = "10";
+/// Correlation of the inverted ΔV with the true one on the test days: measured 0.879 (prepared)
+/// and 0.935 (hand-made) at seed 1, 0.919 and 0.942 at seed 2; required above 0.8.
+const DV_CORRELATION_MIN: f64 = 0.8;
+/// Mean |ΔV prepared − ΔV hand-made| on the test days (10⁶ m³, range ±10): measured 0.77 at seed
+/// 1, 0.66 at seed 2 (two seeds on the same hand-made layout: 0.28); required below 1.2.
+const PIPELINE_DV_DIFFERENCE: f64 = 1.2;
+
+/// Epochs per training in the loop, and surrogates per family.
+const LOOP_EPOCHS: &str = "10";
+const LOOP_SURROGATES: &str = "10";
+
+/// How far (days) the found step's epoch may be from the injected one (measured: on the day).
+const STEP_DAY_TOLERANCE: i64 = 3;

@@ -6,8 +6,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 
-/// How the files become a training set (shared by `magic prepare` and `magic train mogi
-/// --tenv3`).
+/// How the files become a training set.
 #[derive(Args, Clone, Debug, Default)]
 pub struct PrepareArgs {
     /// NGL steps file (`steps.txt`: equipment changes and earthquakes); the offsets at the
