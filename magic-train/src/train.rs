@@ -542,7 +542,9 @@ mod tests {
         gappy[3][0] = f32::NAN;
         gappy[3][5] = f32::NAN;
         let days = days_tensor(&[0.0, 1.0, 2.0, 3.0]).unwrap();
-        let refs = |r: &[Vec<f32>]| r.iter().map(Vec::as_slice).collect::<Vec<_>>();
+        fn refs(r: &[Vec<f32>]) -> Vec<&[f32]> {
+            r.iter().map(Vec::as_slice).collect()
+        }
         let (loss, cells, _) = batch_mse(&net, &refs(&gappy), n, &days).unwrap();
         assert_eq!(cells, 4 * n - 3);
         // By hand: the network fed the rows with the missing cells at the mean (0), the squared

@@ -306,14 +306,17 @@ fn write_hand_made(dir: &Path, net: &Network, margin_km: f64) {
         serde_json::to_string(&st).unwrap(),
     )
     .unwrap();
-    let span = |f: &dyn Fn(&(&str, f64, f64, f64)) -> f64| {
-        let v: Vec<f64> = synth::AKUTAN.iter().map(f).collect();
+    let span = |k: usize| {
+        let v: Vec<f64> = synth::AKUTAN
+            .iter()
+            .map(|s| if k == 0 { s.1 } else { s.2 })
+            .collect();
         let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         [lo - margin_km, hi + margin_km]
     };
     let bounds = serde_json::json!({
-        "x_km": span(&|s| s.1), "y_km": span(&|s| s.2),
+        "x_km": span(0), "y_km": span(1),
         "depth_km": [2.0, 20.0], "dv_1e6m3": [-10.0, 10.0],
     });
     std::fs::write(dir.join("bounds.json"), bounds.to_string()).unwrap();
@@ -527,22 +530,20 @@ fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
         "departure from the truth (rms, max mm) E {:?} N {:?} U {:?}",
         dep[0], dep[1], dep[2]
     );
-    for k in 0..3 {
+    for (k, dep) in dep.iter().enumerate() {
         eprintln!(
             "component {k}: departure rms {:.2} σ, max {:.2} σ (σ = {:.2} mm)",
-            dep[k][0] / sigma_noise(k),
-            dep[k][1] / sigma_noise(k),
+            dep[0] / sigma_noise(k),
+            dep[1] / sigma_noise(k),
             sigma_noise(k)
         );
         assert!(
-            dep[k][0] < DEPARTURE_RMS_NOISE * sigma_noise(k),
-            "{k}: {:?}",
-            dep[k]
+            dep[0] < DEPARTURE_RMS_NOISE * sigma_noise(k),
+            "{k}: {dep:?}"
         );
         assert!(
-            dep[k][1] < DEPARTURE_MAX_NOISE * sigma_noise(k),
-            "{k}: {:?}",
-            dep[k]
+            dep[1] < DEPARTURE_MAX_NOISE * sigma_noise(k),
+            "{k}: {dep:?}"
         );
     }
     // Gaps stay gaps, one row per day.
@@ -557,7 +558,6 @@ fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
         }
     }
     // The unlisted step is still a step of its full size (not a ramp).
-    let ns = synth::AKUTAN.len();
     let s13 = synth::AKUTAN
         .iter()
         .position(|s| s.0 == UNLISTED.0)
