@@ -1,5 +1,5 @@
 //! The classical baseline on a GNSS split (`magic classical`): every day is fitted on its own by
-//! nonlinear least squares ([`crate::lsq`]: Levenberg–Marquardt with the exact Jacobian,
+//! nonlinear least squares ([`crate::gnss::lsq`]: Levenberg–Marquardt with the exact Jacobian,
 //! multi-start from a coarse grid over the bounds), with no encoder and no correction.
 //!
 //! This is the best any per-day Mogi inversion (model B) can do on the paper's metric: the MSE it

@@ -22,7 +22,7 @@
 //!    standard deviation per channel (over the days each channel has data), and the source's
 //!    bounds are derived from the network ([`crate::gnss::SourceBounds::from_network`]).
 //!
-//! [`write`] lays the result out as the release does, with `bounds.json` and a `prepare.json`
+//! [`write()`] lays the result out as the release does, with `bounds.json` and a `prepare.json`
 //! saying what was done (origin, stations, velocities, offsets, periods).
 
 pub mod midas;
