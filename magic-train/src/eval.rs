@@ -15,9 +15,10 @@ pub struct EvalResult {
     pub split: String,
     /// Rows.
     pub n: usize,
-    /// Mean over rows and channels of the squared error (standardised units).
+    /// Mean over rows and channels of the squared error (standardised units; over the observed
+    /// cells where channels are missing).
     pub mse: f64,
-    /// The same per channel.
+    /// The same per channel (over the rows where the channel is observed).
     pub mse_per_channel: Vec<f64>,
     /// MSE of F(E(x)) alone, without the correction (B and C).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -31,6 +32,8 @@ pub struct EvalResult {
 struct Sums {
     n: usize,
     per: Vec<f64>,
+    /// Rows on which each channel is observed.
+    count: Vec<usize>,
     phys: f64,
     corr: f64,
 }
@@ -44,6 +47,7 @@ fn sums(model: &Model<'_>, x: &[Vec<f32>], days: &[f64]) -> Result<Sums> {
     let mut s = Sums {
         n: x.len(),
         per: vec![0.0; n_obs],
+        count: vec![0; n_obs],
         phys: 0.0,
         corr: 0.0,
     };
@@ -56,14 +60,18 @@ fn sums(model: &Model<'_>, x: &[Vec<f32>], days: &[f64]) -> Result<Sums> {
         for c in 0..n_obs {
             let sc = model.obs_scale.get(c) as f64;
             let m = model.obs_mean.get(c) as f64;
+            if model.variant == Variant::C {
+                s.corr += ((inv.recon[c] - inv.physics[c]) / sc).powi(2);
+            }
+            if row[c].is_nan() {
+                continue;
+            }
+            s.count[c] += 1;
             let r = (inv.recon[c] - m) / sc - row[c] as f64;
             s.per[c] += r * r;
             if model.variant != Variant::A {
                 let p = (inv.physics[c] - m) / sc - row[c] as f64;
                 s.phys += p * p;
-            }
-            if model.variant == Variant::C {
-                s.corr += ((inv.recon[c] - inv.physics[c]) / sc).powi(2);
             }
         }
     }
@@ -89,23 +97,34 @@ pub fn evaluate(model: &Model<'_>, split: &Split, name: &str) -> Result<EvalResu
     let nf = n.max(1) as f64;
     let n_obs = model.n_obs();
     let mut per = vec![0.0; n_obs];
+    let mut count = vec![0usize; n_obs];
     let (mut phys, mut corr) = (0.0, 0.0);
     for p in &parts {
         for (a, b) in per.iter_mut().zip(&p.per) {
             *a += b;
         }
+        for (a, b) in count.iter_mut().zip(&p.count) {
+            *a += b;
+        }
         phys += p.phys;
         corr += p.corr;
     }
-    per.iter_mut().for_each(|v| *v /= nf);
-    let cells = nf * n_obs as f64;
+    let observed: usize = count.iter().sum();
+    // Each channel's MSE weighted by its share of the observed cells: the mean over observed
+    // cells, and exactly the plain mean over channels when nothing is missing.
+    let mean_count = observed.max(1) as f64 / n_obs.max(1) as f64;
+    let mut mse = 0.0;
+    for (v, &k) in per.iter_mut().zip(&count) {
+        *v /= k.max(1) as f64;
+        mse += *v * (k as f64 / mean_count);
+    }
     Ok(EvalResult {
         split: name.to_string(),
         n,
-        mse: per.iter().sum::<f64>() / n_obs as f64,
+        mse: mse / n_obs as f64,
         mse_per_channel: per,
-        physics_mse: (model.variant != Variant::A).then_some(phys / cells),
-        correction_ms: (model.variant == Variant::C).then_some(corr / cells),
+        physics_mse: (model.variant != Variant::A).then_some(phys / observed.max(1) as f64),
+        correction_ms: (model.variant == Variant::C).then_some(corr / (nf * n_obs as f64)),
     })
 }
 

@@ -177,21 +177,69 @@ pub struct Reconstruction<'a> {
     pub smooth_mean: bool,
 }
 
-/// Validation MSE of the final reconstruction (standardised units), in chunks of 1 024 rows.
+/// Validation MSE of the final reconstruction (standardised units, over the observed channels),
+/// in chunks of 1 024 rows.
 pub fn valid_mse(net: &Net, data: Rows<'_>) -> Result<f64> {
     let n = data.x.first().map_or(0, |r| r.len());
     let mut sum = 0.0;
-    let mut count = 0usize;
+    // Rows' worth of observed cells (whole rows when nothing is missing).
+    let mut count = 0.0;
     for (ci, chunk) in data.x.chunks(1024).enumerate() {
         let rows: Vec<&[f32]> = chunk.iter().map(|r| r.as_slice()).collect();
-        let t = to_tensor(&rows, n)?;
         let d = days_tensor(&data.days[ci * 1024..ci * 1024 + chunk.len()])?;
-        let out = net.forward(&t, &d)?;
-        let e = mse(&out.recon, &t)?.to_scalar::<f32>()? as f64;
-        sum += e * chunk.len() as f64;
-        count += chunk.len();
+        let (e, cells, _) = batch_mse(net, &rows, n, &d)?;
+        let weight = cells as f64 / n.max(1) as f64;
+        sum += e.to_scalar::<f32>()? as f64 * weight;
+        count += weight;
     }
-    Ok(sum / count.max(1) as f64)
+    Ok(sum / f64::max(count, 1.0))
+}
+
+/// The reconstruction MSE of a batch of rows (standardised, NaN = missing) made on `days`, over
+/// its observed cells, with the number of those cells and F's output (B, C).
+///
+/// A missing channel enters the encoder as 0 — the training mean, as the core fills it on the
+/// first pass of an inversion — and is left out of the error: the model is never asked to
+/// reproduce a value nobody observed (imputing the target would teach it to predict the mean
+/// on such days). A batch without missing channels takes the plain mean over all elements.
+pub fn batch_mse(
+    net: &Net,
+    rows: &[&[f32]],
+    n: usize,
+    days: &Tensor,
+) -> Result<(Tensor, usize, Option<Tensor>)> {
+    let missing = rows
+        .iter()
+        .flat_map(|r| r.iter())
+        .filter(|v| v.is_nan())
+        .count();
+    if missing == 0 {
+        let x = to_tensor(rows, n)?;
+        let out = net.forward(&x, days)?;
+        return Ok((mse(&out.recon, &x)?, rows.len() * n, out.physics));
+    }
+    let filled: Vec<Vec<f32>> = rows
+        .iter()
+        .map(|r| {
+            r.iter()
+                .map(|v| if v.is_nan() { 0.0 } else { *v })
+                .collect()
+        })
+        .collect();
+    let mask: Vec<Vec<f32>> = rows
+        .iter()
+        .map(|r| {
+            r.iter()
+                .map(|v| if v.is_nan() { 0.0 } else { 1.0 })
+                .collect()
+        })
+        .collect();
+    let x = to_tensor(&filled.iter().map(Vec::as_slice).collect::<Vec<_>>(), n)?;
+    let m = to_tensor(&mask.iter().map(Vec::as_slice).collect::<Vec<_>>(), n)?;
+    let out = net.forward(&x, days)?;
+    let cells = rows.len() * n - missing;
+    let sq = out.recon.sub(&x)?.sqr()?.mul(&m)?.sum_all()?;
+    Ok(((sq / cells.max(1) as f64)?, cells, out.physics))
 }
 
 impl Objective for Reconstruction<'_> {
@@ -212,14 +260,12 @@ impl Objective for Reconstruction<'_> {
             .iter()
             .flat_map(|&s| self.train.x[s..s + t].iter().map(|r| r.as_slice()))
             .collect();
-        let x = to_tensor(&rows, n)?;
         let days: Vec<f64> = starts
             .iter()
             .flat_map(|&s| self.train.days[s..s + t].iter().copied())
             .collect();
-        let out = net.forward(&x, &days_tensor(&days)?)?;
-        let mut loss = mse(&out.recon, &x)?;
-        if let (Some(f), true) = (&out.physics, self.lambda > 0.0 && t > 1) {
+        let (mut loss, _, physics) = batch_mse(net, &rows, n, &days_tensor(&days)?)?;
+        if let (Some(f), true) = (&physics, self.lambda > 0.0 && t > 1) {
             let mut s = smoothness(f, starts.len(), t)?;
             if self.smooth_mean {
                 s = (s / (starts.len() * (t - 1) * n) as f64)?;
@@ -452,4 +498,108 @@ pub fn train_model<P: Problem + ?Sized>(
     let mut model = OwnedModel::from_net(&net, problem.spec()?, effects.to_vec())?;
     model.residual_threshold = model.residual_threshold(&data.valid)?;
     Ok((model, log))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::{Dataset, Split};
+
+    /// Agreement of the f32 losses with the same sums in f64 (24 cells of order 1).
+    const F32_SUM_TOLERANCE: f64 = 1e-5;
+
+    /// A plain autoencoder on `n` channels with identity standardisation.
+    fn net(n: usize) -> Net {
+        let data = Dataset {
+            columns: (0..n).map(|c| format!("c{c}")).collect(),
+            mean: vec![0.0; n],
+            scale: vec![1.0; n],
+            train: Split::default(),
+            valid: Split::default(),
+            test: Split::default(),
+            source: "test".into(),
+        };
+        Net::new(
+            Variant::A,
+            &data,
+            None,
+            vec![],
+            3,
+            &mut StdRng::seed_from_u64(3),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn missing_channels_are_left_out_of_the_loss_not_the_day() {
+        let n = 6;
+        let net = net(n);
+        let rows: Vec<Vec<f32>> = (0..4)
+            .map(|r| (0..n).map(|c| ((r * n + c) as f32 * 0.37).sin()).collect())
+            .collect();
+        let mut gappy = rows.clone();
+        gappy[1][2] = f32::NAN;
+        gappy[3][0] = f32::NAN;
+        gappy[3][5] = f32::NAN;
+        let days = days_tensor(&[0.0, 1.0, 2.0, 3.0]).unwrap();
+        fn refs(r: &[Vec<f32>]) -> Vec<&[f32]> {
+            r.iter().map(Vec::as_slice).collect()
+        }
+        let (loss, cells, _) = batch_mse(&net, &refs(&gappy), n, &days).unwrap();
+        assert_eq!(cells, 4 * n - 3);
+        // By hand: the network fed the rows with the missing cells at the mean (0), the squared
+        // error summed over the observed cells only.
+        let filled: Vec<Vec<f32>> = gappy
+            .iter()
+            .map(|r| {
+                r.iter()
+                    .map(|v| if v.is_nan() { 0.0 } else { *v })
+                    .collect()
+            })
+            .collect();
+        let out = net
+            .forward(&to_tensor(&refs(&filled), n).unwrap(), &days)
+            .unwrap();
+        let recon: Vec<Vec<f32>> = out.recon.to_vec2().unwrap();
+        let (mut sq, mut k) = (0.0f64, 0usize);
+        for (r, row) in gappy.iter().enumerate() {
+            for (c, v) in row.iter().enumerate() {
+                if !v.is_nan() {
+                    sq += ((recon[r][c] - v) as f64).powi(2);
+                    k += 1;
+                }
+            }
+        }
+        let got = loss.to_scalar::<f32>().unwrap() as f64;
+        assert!(
+            (got - sq / k as f64).abs() < F32_SUM_TOLERANCE,
+            "{got} vs {}",
+            sq / k as f64
+        );
+        // Without missing cells: the plain mean over every cell.
+        let (full, cells, _) = batch_mse(&net, &refs(&rows), n, &days).unwrap();
+        assert_eq!(cells, 4 * n);
+        let plain = mse(
+            &net.forward(&to_tensor(&refs(&rows), n).unwrap(), &days)
+                .unwrap()
+                .recon,
+            &to_tensor(&refs(&rows), n).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            full.to_scalar::<f32>().unwrap(),
+            plain.to_scalar::<f32>().unwrap()
+        );
+        // The validation MSE counts observed cells: finite on gappy rows.
+        let d = [0.0, 1.0, 2.0, 3.0];
+        let v = valid_mse(
+            &net,
+            Rows {
+                x: &gappy,
+                days: &d,
+            },
+        )
+        .unwrap();
+        assert!((v - sq / k as f64).abs() < F32_SUM_TOLERANCE, "{v}");
+    }
 }

@@ -12,6 +12,7 @@ pub mod invert;
 pub mod lai;
 pub mod map;
 pub mod missing;
+pub mod prepare;
 pub mod reproduce;
 pub mod residuals;
 pub mod station;
@@ -82,6 +83,8 @@ pub enum Cmd {
     Classical(classical::ClassicalCmd),
     /// Convert a folder of NGL `<STA>.tenv3` files to daily displacement rows (mm).
     Tenv3(tenv3::Tenv3Cmd),
+    /// Turn a folder of NGL `<STA>.tenv3` files into a training set (release layout).
+    Prepare(prepare::PrepareCmd),
 }
 
 /// Runs a parsed command line.
@@ -106,5 +109,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Cmd::Missing(a) => missing::run(a),
         Cmd::Classical(a) => classical::run(a),
         Cmd::Tenv3(a) => tenv3::run(a),
+        Cmd::Prepare(a) => prepare::run(a),
     }
 }

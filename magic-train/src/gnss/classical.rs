@@ -1,5 +1,5 @@
 //! The classical baseline on a GNSS split (`magic classical`): every day is fitted on its own by
-//! nonlinear least squares ([`crate::lsq`]: Levenberg–Marquardt with the exact Jacobian,
+//! nonlinear least squares ([`crate::gnss::lsq`]: Levenberg–Marquardt with the exact Jacobian,
 //! multi-start from a coarse grid over the bounds), with no encoder and no correction.
 //!
 //! This is the best any per-day Mogi inversion (model B) can do on the paper's metric: the MSE it
@@ -16,7 +16,7 @@ use crate::numerics::median;
 use crate::problem::Metric;
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::effects::{mogi_with_effects, Effect};
-use magic_core::mogi::{PAPER_BOUNDS, PARAM_NAMES};
+use magic_core::mogi::PARAM_NAMES;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
@@ -130,7 +130,7 @@ pub fn fit_split_with(
         .zip(&bytes)
         .map(|(e, b)| e.borrow(b))
         .collect();
-    let mut bounds: Vec<[f64; 2]> = PAPER_BOUNDS.to_vec();
+    let mut bounds: Vec<[f64; 2]> = p.source_bounds.0.to_vec();
     for e in effects {
         bounds.extend(effect_bounds(e));
     }
@@ -228,9 +228,8 @@ fn summarise(
     let days: Vec<DayFit> = fits.into_iter().map(|(d, _)| d).collect();
     let share =
         |f: &dyn Fn(&DayFit) -> bool| days.iter().filter(|d| f(d)).count() as f64 / n.max(1) as f64;
-    let at_bound = |d: &DayFit| {
-        (0..4).any(|j| d.params[j] <= PAPER_BOUNDS[j][0] || d.params[j] >= PAPER_BOUNDS[j][1])
-    };
+    let sb = p.source_bounds.0;
+    let at_bound = |d: &DayFit| (0..4).any(|j| d.params[j] <= sb[j][0] || d.params[j] >= sb[j][1]);
     let median_source =
         std::array::from_fn(|j| median(&mut days.iter().map(|d| d.params[j]).collect::<Vec<_>>()));
     let in_2008: Vec<usize> = (0..n)

@@ -1,9 +1,10 @@
 //! The GNSS splits laid out like the paper's release: `train.csv`, `valid.csv`, `test.csv`
 //! (standardised displacements `ux_<STA>` ×S, `uy_<STA>` ×S, `uz_<STA>` ×S, `date`, `sin_date`,
-//! `cos_date`), `train_x_mean.csv`, `train_x_scale.csv` (mm) and `stations.json` (km). Read and
-//! written here.
+//! `cos_date`), `train_x_mean.csv`, `train_x_scale.csv` (mm), `stations.json` (km) and, when the
+//! source's bounds are not the paper's, `bounds.json`. Read and written here. An empty or `NaN`
+//! cell is a missing channel (a station down that day).
 
-use super::{GnssProblem, Network};
+use super::{GnssProblem, Network, SourceBounds};
 use crate::data::table::{read_vector, Table};
 use crate::data::{Dataset, Split};
 use anyhow::{bail, Context, Result};
@@ -50,7 +51,7 @@ fn read_split(t: &Table, names: &[String]) -> Result<Split> {
     for r in 0..t.rows.len() {
         let mut row = Vec::with_capacity(cols.len());
         for &c in &cols {
-            row.push(t.num(r, c, false)? as f32);
+            row.push(t.num(r, c, true)? as f32);
         }
         split.x.push(row);
         split
@@ -92,7 +93,12 @@ pub fn read_dir(dir: &Path) -> Result<GnssProblem> {
         test: read_split(&Table::read(&dir.join("test.csv"), b',')?, &names)?,
         source: dir.display().to_string(),
     };
-    Ok(GnssProblem { network, data })
+    let source_bounds = SourceBounds::read_dir(dir)?.unwrap_or_default();
+    Ok(GnssProblem {
+        network,
+        data,
+        source_bounds,
+    })
 }
 
 /// Day of year (1-based) of a `YYYY.MM.DD` date; 0 when it does not parse.
@@ -108,7 +114,8 @@ pub fn day_of_year(date: &str) -> f64 {
 }
 
 /// Writes a dataset in the release layout (`train.csv`, `valid.csv`, `test.csv`,
-/// `train_x_mean.csv`, `train_x_scale.csv`, `stations.json`).
+/// `train_x_mean.csv`, `train_x_scale.csv`, `stations.json`) and its source bounds
+/// (`bounds.json`) when they are not the paper's.
 pub fn write_dir(p: &GnssProblem, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let cols = p.network.channel_names();
@@ -149,5 +156,15 @@ pub fn write_dir(p: &GnssProblem, dir: &Path) -> Result<()> {
         dir.join("stations.json"),
         serde_json::to_string_pretty(&st)?,
     )?;
-    Ok(())
+    if p.source_bounds == SourceBounds::paper() {
+        // No stale bounds from an earlier dataset in the same folder.
+        let stale = dir.join(super::bounds::BOUNDS_FILE);
+        if stale.exists() {
+            std::fs::remove_file(&stale)
+                .with_context(|| format!("{}: cannot remove", stale.display()))?;
+        }
+        Ok(())
+    } else {
+        p.source_bounds.write_dir(dir)
+    }
 }

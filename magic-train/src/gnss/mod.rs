@@ -3,19 +3,23 @@
 //! the whole network, seasonal terms, a vertical term linear in elevation, steps, a second
 //! source, drifts.
 
+pub mod bounds;
 pub mod classical;
 pub mod data;
 pub mod families;
+pub mod geodesy;
 pub mod lsq;
 pub mod missing;
 pub mod physics;
 pub mod plausibility;
+pub mod prepare;
 pub mod recovery;
 pub mod report;
 pub mod residuals;
 pub mod synth;
 pub mod tenv3;
 
+pub use bounds::SourceBounds;
 pub use physics::MogiPhysics;
 pub use residuals::GnssResiduals;
 
@@ -27,7 +31,7 @@ use crate::problem::{Metric, PaperRow, Problem};
 use crate::train::{ModelKind, TrainConfig};
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::model_file::{Names, MAX_NAME, MAX_STATIONS};
-use magic_core::mogi::{Station, Stations, PAPER_BOUNDS, STATION_BYTES};
+use magic_core::mogi::{Station, Stations, STATION_BYTES};
 use magic_core::Model;
 use std::path::Path;
 use std::sync::Arc;
@@ -155,6 +159,9 @@ pub struct GnssProblem {
     pub network: Network,
     /// Displacements (standardised) in channel order `ux ×S, uy ×S, uz ×S`.
     pub data: Dataset,
+    /// Bounds of the source's variables (the paper's Table 2 unless the data folder has a
+    /// `bounds.json`).
+    pub source_bounds: SourceBounds,
 }
 
 /// A latent effect the user can declare by name (`common_mode`, `elevation`); fitted effects
@@ -169,7 +176,8 @@ pub enum LatentEffect {
 }
 
 impl GnssProblem {
-    /// Reads a folder laid out like the paper's `gnss/`.
+    /// Reads a folder laid out like the paper's `gnss/` (with a `bounds.json` when the source's
+    /// bounds are not the paper's).
     pub fn read(dir: &Path) -> Result<GnssProblem> {
         data::read_dir(dir)
     }
@@ -219,7 +227,7 @@ impl Problem for GnssProblem {
         TrainConfig::gnss()
     }
     fn bounds(&self, effects: &[OwnedEffect]) -> Vec<[f64; 2]> {
-        let mut b = PAPER_BOUNDS.to_vec();
+        let mut b = self.source_bounds.0.to_vec();
         for e in effects {
             b.extend(effect_bounds(e));
         }

@@ -98,6 +98,7 @@ pub fn before_after(
                     .x
                     .iter()
                     .map(|r| (r[2 * ns + s] as f64 * p.data.scale[2 * ns + s]).powi(2))
+                    .filter(|v| v.is_finite())
                     .sum::<f64>()
             };
             var(a).total_cmp(&var(b))
@@ -107,6 +108,8 @@ pub fn before_after(
     let mut ws = Workspace::default();
     let (mut obs_s, mut before, mut after) = (vec![], vec![], vec![]);
     let mut res = [vec![[0f64; 3]; ns], vec![[0f64; 3]; ns]];
+    // Days each channel is observed (missing channels leave the residual maps alone).
+    let mut seen = vec![[0usize; 3]; ns];
     for (row, t) in split.x.iter().zip(&days) {
         let obs = p.data.physical_row(row);
         let i0 = invert_at::<f64>(first, &obs, *t, &mut ws)?;
@@ -114,11 +117,20 @@ pub fn before_after(
         obs_s.push(obs[c] as f64);
         before.push(i0.physics[c]);
         after.push(i1.physics[c]);
+        for s in 0..ns {
+            for comp in 0..3 {
+                if !obs[comp * ns + s].is_nan() {
+                    seen[s][comp] += 1;
+                }
+            }
+        }
         for (k, inv) in [i0, i1].iter().enumerate() {
             for s in 0..ns {
                 for comp in 0..3 {
                     let r = obs[comp * ns + s] as f64 - inv.physics[comp * ns + s];
-                    res[k][s][comp] += r * r;
+                    if r.is_finite() {
+                        res[k][s][comp] += r * r;
+                    }
                 }
             }
         }
@@ -136,13 +148,18 @@ pub fn before_after(
         ],
     )?;
     let st = stations(&p.network);
-    let n = split.len().max(1) as f64;
+    let rms = |r: &[f64; 3], s: usize, comp: usize| (r[comp] / seen[s][comp].max(1) as f64).sqrt();
     for (k, label) in ["before", "after"].iter().enumerate() {
         let vec: Vec<(f64, f64)> = res[k]
             .iter()
-            .map(|r| ((r[0] / n).sqrt(), (r[1] / n).sqrt()))
+            .enumerate()
+            .map(|(s, r)| (rms(r, s, 0), rms(r, s, 1)))
             .collect();
-        let val: Vec<f64> = res[k].iter().map(|r| (r[2] / n).sqrt()).collect();
+        let val: Vec<f64> = res[k]
+            .iter()
+            .enumerate()
+            .map(|(s, r)| rms(r, s, 2))
+            .collect();
         plots::station_map(
             &dir.join(format!("residual_map_{label}.png")),
             &format!("residual RMS of F {label} the loop (arrows: E, N; colour: U), test split"),

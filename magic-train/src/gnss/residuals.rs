@@ -7,7 +7,8 @@
 //! each day's observation less F's time-dependent declared effects, in the data's standardised
 //! units (the paper's metric), projected off the span of F's Jacobian (the main source's position,
 //! depth and volume, and the declared latent effects), each channel's mean over the analysed split
-//! removed. For a C model the same holds: the correction absorbs bias, the question is what F
+//! removed (a channel missing on a day takes the model's reconstruction, as the core fills it at
+//! inversion). For a C model the same holds: the correction absorbs bias, the question is what F
 //! lacks. Working off the linearisation rather than off `x − F(E(x))` keeps the analysis
 //! independent of how the encoder distorts its variables to mimic a missing effect (an encoder
 //! readily moves the main source towards a second one, or tilts it to follow a step at an edge
@@ -187,8 +188,14 @@ fn invert_split(
                 let obs = p.data.physical_row(row);
                 let inv = invert_at::<f64>(model, &obs, t, ws)
                     .map_err(|e| anyhow!("{name} day {t}: {e}"))?;
+                // A missing channel takes the model's own reconstruction (as the core fills it):
+                // it then adds nothing that F could not produce.
                 Ok(Day {
-                    obs: obs.iter().map(|v| *v as f64).collect(),
+                    obs: obs
+                        .iter()
+                        .zip(&inv.recon)
+                        .map(|(v, r)| if v.is_nan() { *r } else { *v as f64 })
+                        .collect(),
                     physics: inv.physics[..nc].to_vec(),
                     params: inv.params[..np].to_vec(),
                 })

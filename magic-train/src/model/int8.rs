@@ -22,8 +22,17 @@ impl OwnedModel {
             bail!("int8 export needs calibration data");
         }
         let mut out = self.clone();
-        // Encoder inputs per layer.
-        let enc_max = max_abs_inputs(&self.encoder, calib)?;
+        // Encoder inputs per layer: a missing channel (NaN) enters as 0, the training mean, as
+        // on the first pass of an inversion.
+        let filled: Vec<Vec<f32>> = calib
+            .iter()
+            .map(|r| {
+                r.iter()
+                    .map(|v| if v.is_nan() { 0.0 } else { *v })
+                    .collect()
+            })
+            .collect();
+        let enc_max = max_abs_inputs(&self.encoder, &filled)?;
         let keep_f32_last = matches!(self.variant, Variant::B | Variant::C);
         let n_enc = self.encoder.len();
         out.encoder = quantize_chain(

@@ -26,6 +26,7 @@ pub mod scenario;
 pub mod source;
 pub mod truth;
 
+pub use draw::normal;
 pub use inject::second_source::resolvable;
 pub use noise::NoiseModel;
 pub use record::{iso_date, Layout};
@@ -121,7 +122,11 @@ impl Spec {
         let data = record::dataset(&layout, &network, &mm, self.source_label());
         let truth = truth::truth(self, &history, &effects, &background.described);
         Synthetic {
-            problem: GnssProblem { network, data },
+            problem: GnssProblem {
+                network,
+                data,
+                source_bounds: super::SourceBounds::paper(),
+            },
             dv: history.dv,
             truth,
         }

@@ -52,6 +52,33 @@ pub fn read_dir(
     stations: Option<&[String]>,
     reference: Reference,
 ) -> Result<Tenv3Read> {
+    let mut read = read_series(dir, stations)?;
+    let (daily, e, n) = combine(&read.series, reference);
+    read.errors.extend(e);
+    read.notes.extend(n);
+    read.errors
+        .sort_by(|a, b| (&a.path, a.line, a.column).cmp(&(&b.path, b.line, b.column)));
+    Ok(Tenv3Read {
+        daily,
+        errors: read.errors,
+        notes: read.notes,
+    })
+}
+
+/// The station series of a folder, before they are combined into daily rows.
+#[derive(Clone, Debug, Default)]
+pub struct SeriesRead {
+    /// One series per station, in column order (empty for a station without a readable file).
+    pub series: Vec<StationSeries>,
+    /// Bad lines and unreadable files, in file order.
+    pub errors: Vec<Tenv3Error>,
+    /// Remarks for the user.
+    pub notes: Vec<String>,
+}
+
+/// Reads and parses the station files in `dir` for `stations` (as [`read_dir`]) without
+/// combining them.
+pub fn read_series(dir: &Path, stations: Option<&[String]>) -> Result<SeriesRead> {
     let files = list_dir(dir)?;
     let names: Vec<String> = match stations {
         Some(s) => s.to_vec(),
@@ -121,12 +148,8 @@ pub fn read_dir(
             ));
         }
     }
-    let (daily, e, n) = combine(&series, reference);
-    errors.extend(e);
-    notes.extend(n);
-    errors.sort_by(|a, b| (&a.path, a.line, a.column).cmp(&(&b.path, b.line, b.column)));
-    Ok(Tenv3Read {
-        daily,
+    Ok(SeriesRead {
+        series,
         errors,
         notes,
     })

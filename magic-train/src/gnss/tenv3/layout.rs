@@ -44,6 +44,8 @@ pub(crate) struct Layout {
     pub(crate) int: [usize; 3],
     pub(crate) frac: [usize; 3],
     pub(crate) sigma: [Option<usize>; 3],
+    /// Latitude, longitude and height fields, when the layout has all three (the 23-field one).
+    pub(crate) geo: Option<[usize; 3]>,
     /// Fields that must hold finite numbers.
     pub(crate) numeric: Vec<usize>,
 }
@@ -100,6 +102,14 @@ impl Layout {
                 need("up(m)", "____up(m)")?,
             ],
             sigma: [find("sig_e(m)"), find("sig_n(m)"), find("sig_u(m)")],
+            geo: match (
+                find("latitude(deg)"),
+                find("longitude(deg)"),
+                find("height(m)"),
+            ) {
+                (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+                _ => None,
+            },
             numeric: (0..names.len())
                 .filter(|&i| NUMERIC.contains(&normed[i].as_str()))
                 .collect(),

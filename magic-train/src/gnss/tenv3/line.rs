@@ -21,6 +21,9 @@ pub struct Epoch {
     pub sigma: [f64; 3],
     /// 1-based character columns of the fractional fields (for messages).
     pub frac_col: [usize; 3],
+    /// Latitude (°), longitude (° as written: NGL does not wrap it into ±180°) and ellipsoidal
+    /// height (m) of the day's position, when the file has those fields.
+    pub geo: Option<[f64; 3]>,
 }
 
 impl Epoch {
@@ -112,6 +115,18 @@ pub(crate) fn parse_line(
             ),
         ));
     }
+    if let Some([lat, _, _]) = layout.geo {
+        if num[lat].abs() > 90.0 {
+            return Err((
+                f[lat].0,
+                format!(
+                    "{}: expected a latitude within ±90°, found `{}`",
+                    what(lat),
+                    f[lat].1
+                ),
+            ));
+        }
+    }
     let mut sigma = [f64::NAN; 3];
     for (k, s) in layout.sigma.iter().enumerate() {
         if let Some(i) = *s {
@@ -139,5 +154,6 @@ pub(crate) fn parse_line(
         frac: layout.frac.map(|i| num[i]),
         sigma,
         frac_col: layout.frac.map(|i| f[i].0),
+        geo: layout.geo.map(|g| g.map(|i| num[i])),
     })
 }

@@ -40,7 +40,7 @@ pub(crate) mod test_lines;
 
 pub use daily::{combine, Daily, Reference};
 pub use dates::{format_date, parse_ymd, parse_yymmmdd, MJD_1970};
-pub use folder::{list_dir, read_dir, Tenv3Read};
+pub use folder::{list_dir, read_dir, read_series, SeriesRead, Tenv3Read};
 pub use layout::{HEADER, OLD_FIELDS};
 pub use line::Epoch;
 pub use station::{parse_station, StationSeries};

@@ -19,6 +19,26 @@ pub struct StationSeries {
     pub epochs: Vec<Epoch>,
 }
 
+impl StationSeries {
+    /// The station's geodetic position: the median latitude (°), longitude (° east, wrapped into
+    /// (−180°, 180°]) and ellipsoidal height (m) over its good epochs; `None` when its file has no
+    /// such fields (the older 20-field layout) or no good epoch. Longitudes are unwrapped about
+    /// the first epoch's before the median, so a station on the antimeridian stays there.
+    pub fn geodetic(&self) -> Option<[f64; 3]> {
+        let geo: Vec<[f64; 3]> = self.epochs.iter().filter_map(|e| e.geo).collect();
+        let lon0 = crate::gnss::geodesy::wrap_longitude(geo.first()?[1]);
+        let median = |mut v: Vec<f64>| crate::numerics::median(&mut v);
+        let lat = median(geo.iter().map(|g| g[0]).collect());
+        let lon = median(
+            geo.iter()
+                .map(|g| lon0 + crate::gnss::geodesy::wrap_longitude(g[1] - lon0))
+                .collect(),
+        );
+        let h = median(geo.iter().map(|g| g[2]).collect());
+        Some([lat, crate::gnss::geodesy::wrap_longitude(lon), h])
+    }
+}
+
 /// Builds the errors of one file.
 struct Errors<'a> {
     path: &'a str,
