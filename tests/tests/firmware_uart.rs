@@ -654,10 +654,7 @@ fn station_command_writes_one_row_per_input_row() {
     for (i, ((id, result), h)) in out.iter().zip(&host).enumerate() {
         if i == 5 {
             assert_eq!(*id, None);
-            assert!(
-                result.contains(&format!("cli.csv:7:{column}:")),
-                "{result}"
-            );
+            assert!(result.contains(&format!("cli.csv:7:{column}:")), "{result}");
             continue;
         }
         assert_eq!(*id, station::model_id(&bytes), "row {i}");
