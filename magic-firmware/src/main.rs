@@ -21,7 +21,7 @@
 //! cargo build -p magic-firmware --target thumbv7em-none-eabihf --profile mcu --no-default-features --features uart
 //! ```
 //!
-//! Both print results exactly as the host's `magic invert` does ([`magic_core::line`]). On the
+//! Both print results exactly as the host's `magic invert` does (`magic_core::line`). On the
 //! host the crate is a stub `fn main() {}` so that `cargo test --workspace` builds it.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]

@@ -23,7 +23,7 @@ use magic_core::{invert_at, Workspace};
 pub struct OwnedModel {
     /// Paper variant.
     pub variant: Variant,
-    /// Problem description (RTM table bytes interned: see `data::rtm_tables::intern`).
+    /// Problem description (RTM table bytes interned: see [`intern`]).
     pub problem: Problem<'static>,
     /// Observation mean.
     pub mean: Vec<f32>,

@@ -222,7 +222,7 @@ impl PackedRows {
         self.bands.iter().fold(0, |m, b| m | 1 << b)
     }
 
-    /// The model-file problem: these rows rounded to f32 (interned: see [`intern`]).
+    /// The model-file problem: these rows rounded to f32 (interned: see [`intern`](crate::model::intern)).
     pub fn problem(&self, fixed: Fixed, geometry: Geometry) -> Problem<'static> {
         Problem::Rtm {
             geometry,

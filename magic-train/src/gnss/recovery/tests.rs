@@ -151,7 +151,7 @@ fn the_table_counts_per_scenario_placement_and_noise() {
         json!({"station": "AV13", "epoch": "2007-01-02", "offset_mm": [0, 0, 0]}),
     );
     let rows = vec![
-        recovery(&truth(1, "paper"), &[hit.clone()]),
+        recovery(&truth(1, "paper"), std::slice::from_ref(&hit)),
         recovery(
             &truth(2, "paper"),
             &[cand("drift", true, json!({})), hit.clone()],
