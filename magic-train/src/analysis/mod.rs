@@ -129,6 +129,16 @@ impl Analysis {
                 if c.significant { "yes" } else { "no" },
                 compact(&c.params)
             );
+            for p in &c.uncertainty {
+                let _ = writeln!(
+                    s,
+                    "{:>16} {} = {:.4} ± {:.4} (bootstrap sd)",
+                    "", p.name, p.value, p.sd
+                );
+            }
+            if let Some(why) = &c.rejected {
+                let _ = writeln!(s, "{:>16} rejected: {why}", "");
+            }
         }
         s
     }

@@ -128,6 +128,7 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
                     format!("{:.4}", c.chance_level),
                     if c.significant { "yes" } else { "no" }.into(),
                     if c.effect.is_some() { "yes" } else { "no" }.into(),
+                    uncertainty_cell(&c.uncertainty),
                     format!("`{}`", c.params),
                 ]
             })
@@ -138,6 +139,7 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
             "chance",
             "significant",
             "declarable",
+            "key parameters ± sd (bootstrap)",
             "params",
         ]
         .iter()
@@ -173,4 +175,15 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
         &b,
         &[],
     )
+}
+
+/// A candidate's key parameters with their bootstrap standard deviations (`name v ± sd`), or `–`.
+fn uncertainty_cell(u: &[crate::analysis::ParamSd]) -> String {
+    if u.is_empty() {
+        return "–".into();
+    }
+    u.iter()
+        .map(|p| format!("{} {:.3} ± {:.3}", p.name, p.value, p.sd))
+        .collect::<Vec<_>>()
+        .join("; ")
 }
