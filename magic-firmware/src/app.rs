@@ -41,22 +41,9 @@ pub fn run() -> bool {
         return false;
     };
     let clock = Clock::start(cp.SYST);
-    let model = match load_model() {
-        Some(Ok(m)) => m,
-        Some(Err(e)) => {
-            let _ = out.write_str("error,model: ");
-            e.describe(&mut out);
-            out.end_line();
-            return false;
-        }
-        None => return false,
-    };
-    if let Err(what) = self_check(model) {
-        let _ = out.write_str("error,self-check: ");
-        let _ = out.write_str(what);
-        out.end_line();
+    let Some(model) = start_model(&mut out) else {
         return false;
-    }
+    };
 
     // (A validated model has at most MAX_OBS channels; the clamp spares the slicing below its
     // panic paths.)
@@ -133,11 +120,8 @@ pub fn run() -> bool {
     kv(&mut out, "instructions_per_inversion_min", total.min);
     kv(&mut out, "instructions_per_inversion_max", total.max);
     kv(&mut out, "inversions_with_missing", missing.n);
-    kv(
-        &mut out,
-        "instructions_per_inversion_with_missing",
-        missing.mean(),
-    );
+    let key = "instructions_per_inversion_with_missing";
+    kv(&mut out, key, missing.mean());
     kv(&mut out, "instructions_parse_line", parse.mean());
     let [enc, mogi, corr] = parts;
     kv(&mut out, "instructions_encoder", enc.mean());
@@ -161,6 +145,28 @@ pub fn run() -> bool {
         return false;
     }
     true
+}
+
+/// Decodes the embedded model and self-checks the int8 kernel on it; `None` (after an error
+/// line, if there is something to say) when either fails.
+fn start_model(out: &mut Out) -> Option<&'static Model<'static>> {
+    let model = match load_model() {
+        Some(Ok(m)) => m,
+        Some(Err(e)) => {
+            let _ = out.write_str("error,model: ");
+            e.describe(out);
+            out.end_line();
+            return None;
+        }
+        None => return None,
+    };
+    if let Err(what) = self_check(model) {
+        let _ = out.write_str("error,self-check: ");
+        let _ = out.write_str(what);
+        out.end_line();
+        return None;
+    }
+    Some(model)
 }
 
 /// The inversion's working memory, in a static.

@@ -20,7 +20,9 @@ use magic_core::{Flags, Model, Variant};
 use magic_train::data::records::{self, ObsRow};
 use magic_train::firmware::qemu::{build_firmware, ensure_toolchain, run_firmware};
 use magic_train::firmware::qemu_uart::{build_deployable, semihosting_calls, UartQemu};
-use magic_train::firmware::station::{self, Answer, BoardStatus, Event, Item, Link, Station};
+use magic_train::firmware::station::{
+    self, Answer, BoardStatus, Event, Item, Link, Station, Transcript,
+};
 use magic_train::gnss::synth;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -208,22 +210,57 @@ fn board_answer(a: &Option<Answer>) -> &str {
     }
 }
 
-#[test]
-fn ten_thousand_days_with_model_updates_in_the_stream() {
-    if !toolchain_ready() {
-        return;
+/// The models of the stream test: three good ones and the failed updates made from the third.
+struct Updates {
+    a: Vec<u8>,
+    b: Vec<u8>,
+    c: Vec<u8>,
+    /// C with a flipped byte.
+    corrupt: Vec<u8>,
+    /// C in another format version.
+    old_version: Vec<u8>,
+    /// C's upload lines.
+    c_lines: Vec<String>,
+    /// The ids of A, B and C.
+    ids: Vec<u32>,
+}
+
+impl Updates {
+    fn new() -> Updates {
+        let (a, b, c) = (model(11), model(12), model(13));
+        let ids: Vec<u32> = [&a, &b, &c]
+            .iter()
+            .map(|m| station::model_id(m).unwrap())
+            .collect();
+        // Failed updates: a flipped byte, too large for a slot, another format version.
+        let mut corrupt = c.clone();
+        corrupt[c.len() / 2] ^= 0x10;
+        let old_version = with_version(&c, 4);
+        let c_lines = station::upload_lines(&c);
+        Updates {
+            a,
+            b,
+            c,
+            corrupt,
+            old_version,
+            c_lines,
+            ids,
+        }
     }
-    let (a, b, c) = (model(11), model(12), model(13));
-    let models: Vec<Model<'_>> = [&a, &b, &c]
-        .iter()
-        .map(|m| Model::decode(m).unwrap())
-        .collect();
-    let ids: Vec<u32> = [&a, &b, &c]
-        .iter()
-        .map(|m| station::model_id(m).unwrap())
-        .collect();
-    let (_, rows) = days(&models[0], "days.csv");
-    let mut wire: Vec<String> = station::day_lines(&rows, false)
+}
+
+/// The stream's script: the lines sent, the item of each day, which model must answer each
+/// day, and the item where each update starts.
+struct Script {
+    items: Vec<Item>,
+    day_item: Vec<usize>,
+    expect: Vec<usize>,
+    marks: BTreeMap<&'static str, usize>,
+}
+
+/// The day lines of `rows` with ten of them malformed; returns them and the malformed ones.
+fn wire_with_bad_days(rows: &[ObsRow]) -> (Vec<String>, Vec<usize>) {
+    let mut wire: Vec<String> = station::day_lines(rows, false)
         .into_iter()
         .map(|l| l.expect("every synthetic row is valid"))
         .collect();
@@ -233,14 +270,11 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
         wire[i] = malformed(&wire[i], k);
         bad.push(i);
     }
+    (wire, bad)
+}
 
-    // Failed updates: a flipped byte, too large for a slot, another format version.
-    let mut corrupt = c.clone();
-    corrupt[c.len() / 2] ^= 0x10;
-    let old_version = with_version(&c, 4);
-    let c_lines = station::upload_lines(&c);
-
-    // The script, and which model must answer each day.
+/// The days with the updates in the middle of the stream.
+fn script(wire: &[String], u: &Updates) -> Script {
     let mut items = Vec::new();
     let mut day_item = vec![0usize; DAYS];
     let mut expect = vec![0usize; DAYS];
@@ -255,19 +289,20 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
     let mut mark = |items: &Vec<Item>, name: &'static str| {
         marks.insert(name, items.len());
     };
+    let c_lines = &u.c_lines;
     mark(&items, "upload A");
-    items.extend(lines_of(station::upload_lines(&a)));
+    items.extend(lines_of(station::upload_lines(&u.a)));
     add_days(&mut items, 0..2500, 0);
     mark(&items, "upload B");
-    items.extend(lines_of(station::upload_lines(&b)));
+    items.extend(lines_of(station::upload_lines(&u.b)));
     add_days(&mut items, 2500..4000, 1);
     mark(&items, "corrupt");
-    items.extend(lines_of(station::upload_lines(&corrupt)));
+    items.extend(lines_of(station::upload_lines(&u.corrupt)));
     add_days(&mut items, 4000..5000, 1);
     mark(&items, "too large");
-    items.push(Item::Line(format!("!model 30000 {:08x}", ids[2])));
+    items.push(Item::Line(format!("!model 30000 {:08x}", u.ids[2])));
     mark(&items, "version");
-    items.extend(lines_of(station::upload_lines(&old_version)));
+    items.extend(lines_of(station::upload_lines(&u.old_version)));
     add_days(&mut items, 5000..6000, 1);
     mark(&items, "cut off");
     items.extend(lines_of(c_lines[..c_lines.len() / 2].to_vec()));
@@ -279,44 +314,30 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
     mark(&items, "upload C");
     items.extend(lines_of(c_lines.clone()));
     add_days(&mut items, 8000..DAYS, 2);
+    Script {
+        items,
+        day_item,
+        expect,
+        marks,
+    }
+}
 
-    // The board.
-    let elf = build_deployable(&[]).expect("building the deployable firmware");
-    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
-    let mut st = connect(&mut qemu);
-    assert_eq!(st.status.model, None, "a fresh board has no model");
-    assert_eq!(st.status.reset, "power-on");
-    let start = Instant::now();
-    let t = st.run(&items).expect("streaming");
-    let elapsed = start.elapsed().as_secs_f64();
-    let sent: usize = items
-        .iter()
-        .map(|i| match i {
-            Item::Day(s) | Item::Line(s) => s.len() + 1,
-            Item::Pause(_) => 0,
-        })
-        .sum();
-    eprintln!(
-        "{} lines ({} days, {:.1} MB) in {elapsed:.1} s (3 s of it a pause): {:.0} days/s",
-        items.len(),
-        DAYS,
-        sent as f64 / 1e6,
-        DAYS as f64 / elapsed
-    );
-
-    // The updates: answered as they must be.
-    let answer = |name: &str, k: usize| board_answer(&t.answers[marks[name] + k]).to_string();
+/// The updates were answered as they must be, and the abandoned ones reported unasked when the
+/// next day came and after the timeout.
+fn check_updates(t: &Transcript, sc: &Script, u: &Updates) {
+    let (a, b, c, ids) = (&u.a, &u.b, &u.c, &u.ids);
+    let answer = |name: &str, k: usize| board_answer(&t.answers[sc.marks[name] + k]).to_string();
     let n_lines = |m: &[u8]| station::upload_lines(m).len();
     assert_eq!(answer("upload A", 0), format!("model,ready,{}", a.len()));
     assert_eq!(
-        answer("upload A", n_lines(&a) - 1),
+        answer("upload A", n_lines(a) - 1),
         format!("model,ok,{:08x}", ids[0])
     );
     assert_eq!(
-        answer("upload B", n_lines(&b) - 1),
+        answer("upload B", n_lines(b) - 1),
         format!("model,ok,{:08x}", ids[1])
     );
-    let corrupt_answer = answer("corrupt", n_lines(&corrupt) - 1);
+    let corrupt_answer = answer("corrupt", n_lines(&u.corrupt) - 1);
     assert!(
         corrupt_answer.starts_with("model,error,model: model file is corrupt: CRC stored"),
         "{corrupt_answer}"
@@ -326,11 +347,11 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
         "model,error,too large: 30000 bytes, a slot holds 24576"
     );
     assert_eq!(
-        answer("version", n_lines(&old_version) - 1),
+        answer("version", n_lines(&u.old_version) - 1),
         "model,error,model: model format version 4 is not supported (this build reads 5)"
     );
     assert_eq!(
-        answer("upload C", n_lines(&c) - 1),
+        answer("upload C", n_lines(c) - 1),
         format!("model,ok,{:08x}", ids[2])
     );
     // The abandoned ones: unasked lines, when the next day came and after the timeout.
@@ -342,13 +363,13 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
             other => panic!("unexpected event {other:?}"),
         })
         .collect();
-    let half = c_lines.len() / 2 - 1;
-    let third = c_lines.len() / 3 - 1;
+    let half = u.c_lines.len() / 2 - 1;
+    let third = u.c_lines.len() / 3 - 1;
     assert_eq!(
         abandoned,
         vec![
             (
-                day_item[6000],
+                sc.day_item[6000],
                 format!(
                     "!model,error,interrupted by a line that is not model data after {} of {} bytes",
                     half * station::UPLOAD_BYTES_PER_LINE,
@@ -356,7 +377,7 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
                 )
             ),
             (
-                day_item[7000],
+                sc.day_item[7000],
                 format!(
                     "!model,error,timed out after {} of {} bytes",
                     third * station::UPLOAD_BYTES_PER_LINE,
@@ -365,27 +386,38 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
             ),
         ]
     );
+}
 
-    // Every day: one answer, naming the model that must be running.
+/// Every day has one answer, naming the model that must be running; returns the days answered
+/// by each model and each day's result (the answer without the model id).
+fn answers_by_model(t: &Transcript, sc: &Script, ids: &[u32]) -> (Vec<Vec<usize>>, Vec<String>) {
     let mut by_model: Vec<Vec<usize>> = vec![Vec::new(); 3];
     let mut results = vec![String::new(); DAYS];
-    for i in 0..DAYS {
-        let line = board_answer(&t.answers[day_item[i]]);
+    for (i, result) in results.iter_mut().enumerate() {
+        let line = board_answer(&t.answers[sc.day_item[i]]);
         let (id, rest) = station::split_answer(line).unwrap_or_else(|| panic!("day {i}: {line}"));
         let m = ids
             .iter()
             .position(|&x| x == id)
             .unwrap_or_else(|| panic!("day {i}: {line}"));
-        assert_eq!(m, expect[i], "day {i} answered by the wrong model: {line}");
+        assert_eq!(
+            m, sc.expect[i],
+            "day {i} answered by the wrong model: {line}"
+        );
         by_model[m].push(i);
-        results[i] = rest.to_string();
+        *result = rest.to_string();
     }
-    for &i in &bad {
-        assert!(results[i].starts_with("error,"), "day {i}: {}", results[i]);
-    }
+    (by_model, results)
+}
 
-    // Against the measuring (semihosting) firmware with the same model: the same text.
-    for (m, bytes) in [&a, &b, &c].iter().enumerate() {
+/// Against the measuring (semihosting) firmware with the same model: the same text.
+fn check_against_measuring(
+    u: &Updates,
+    wire: &[String],
+    by_model: &[Vec<usize>],
+    results: &[String],
+) {
+    for (m, bytes) in [&u.a, &u.b, &u.c].iter().enumerate() {
         let path = temp_dir().join(format!("model-{m}.magic"));
         std::fs::write(&path, bytes).unwrap();
         let fw = build_firmware(&path).expect("building the measuring firmware");
@@ -413,11 +445,20 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
             );
         }
     }
+}
 
-    // Against `magic invert` (the host, f64) with the model each answer names.
+/// Against `magic invert` (the host, f64) with the model each answer names; returns the
+/// largest difference.
+fn check_against_host(
+    models: &[Model<'_>],
+    rows: &[ObsRow],
+    (wire, bad): (&[String], &[usize]),
+    by_model: &[Vec<usize>],
+    results: &[String],
+) -> f64 {
     let mut worst = 0f64;
     for (m, model) in models.iter().enumerate() {
-        let host = records::invert_rows(model, &rows);
+        let host = records::invert_rows(model, rows);
         for &i in &by_model[m] {
             let h = if bad.contains(&i) {
                 host_line(model, &wire[i])
@@ -427,6 +468,56 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
             worst = worst.max(agrees(model, &results[i], &h, &format!("day {i}")));
         }
     }
+    worst
+}
+
+#[test]
+fn ten_thousand_days_with_model_updates_in_the_stream() {
+    if !toolchain_ready() {
+        return;
+    }
+    let u = Updates::new();
+    let models: Vec<Model<'_>> = [&u.a, &u.b, &u.c]
+        .iter()
+        .map(|m| Model::decode(m).unwrap())
+        .collect();
+    let (_, rows) = days(&models[0], "days.csv");
+    let (wire, bad) = wire_with_bad_days(&rows);
+    // The script, and which model must answer each day.
+    let sc = script(&wire, &u);
+
+    // The board.
+    let elf = build_deployable(&[]).expect("building the deployable firmware");
+    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
+    let mut st = connect(&mut qemu);
+    assert_eq!(st.status.model, None, "a fresh board has no model");
+    assert_eq!(st.status.reset, "power-on");
+    let start = Instant::now();
+    let t = st.run(&sc.items).expect("streaming");
+    let elapsed = start.elapsed().as_secs_f64();
+    let sent: usize = sc
+        .items
+        .iter()
+        .map(|i| match i {
+            Item::Day(s) | Item::Line(s) => s.len() + 1,
+            Item::Pause(_) => 0,
+        })
+        .sum();
+    eprintln!(
+        "{} lines ({} days, {:.1} MB) in {elapsed:.1} s (3 s of it a pause): {:.0} days/s",
+        sc.items.len(),
+        DAYS,
+        sent as f64 / 1e6,
+        DAYS as f64 / elapsed
+    );
+
+    check_updates(&t, &sc, &u);
+    let (by_model, results) = answers_by_model(&t, &sc, &u.ids);
+    for &i in &bad {
+        assert!(results[i].starts_with("error,"), "day {i}: {}", results[i]);
+    }
+    check_against_measuring(&u, &wire, &by_model, &results);
+    let worst = check_against_host(&models, &rows, (&wire, &bad), &by_model, &results);
     eprintln!(
         "days per model: A {}, B {}, C {}; largest difference from the host {worst:.2e} of a variable's range",
         by_model[0].len(),
@@ -435,61 +526,27 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
     );
 }
 
-#[test]
-fn resets_keep_the_last_model_and_the_watchdog_resets_a_hung_board() {
-    if !toolchain_ready() {
-        return;
-    }
-    let (a, b, c) = (model(21), model(22), model(23));
-    let id = |m: &[u8]| station::model_id(m).unwrap();
-    let elf = build_deployable(&["hang-command"]).expect("building the deployable firmware");
-    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
-    let mut st = connect(&mut qemu);
-    let day = {
-        let m = Model::decode(&a).unwrap();
-        let (_, rows) = days(&m, "reset-days.csv");
-        station::day_lines(&rows[..8], false)
-            .into_iter()
-            .map(|l| l.unwrap())
-            .collect::<Vec<_>>()
-    };
-    let answered_by = |st: &mut Station| -> Vec<u32> {
-        let items: Vec<Item> = day.iter().cloned().map(Item::Day).collect();
-        let t = st.run(&items).unwrap();
-        t.answers
-            .iter()
-            .map(|a| station::split_answer(board_answer(a)).unwrap().0)
-            .collect()
-    };
-    let check = |s: &BoardStatus, model: &[u8], slot: usize, reset: &str| {
-        assert_eq!(s.model, Some(id(model)), "{s:?}");
-        assert_eq!(s.slot, Some(slot), "{s:?}");
-        assert_eq!(s.reset, reset, "{s:?}");
-    };
-
-    // A into slot 0, B into slot 1, C into slot 0 again: each survives a reset.
-    for (m, slot) in [(&a, 0), (&b, 1), (&c, 0)] {
-        st.upload(m).expect("upload");
-        let s = st.reset().expect("reset");
-        check(&s, m, slot, "command");
-        assert!(answered_by(&mut st).iter().all(|&x| x == id(m)));
-    }
-    // A refused upload and a half-done one leave C in use, before and after a reset.
-    let mut corrupt = a.clone();
-    corrupt[100] ^= 1;
-    assert!(st.upload(&corrupt).is_err());
-    let half = station::upload_lines(&b);
-    let t = st.run(&lines_of(half[..half.len() / 2].to_vec())).unwrap();
-    assert!(t
-        .answers
+/// The model that answers each of the `days`, by id.
+fn answered_by(st: &mut Station, days: &[String]) -> Vec<u32> {
+    let items: Vec<Item> = days.iter().cloned().map(Item::Day).collect();
+    let t = st.run(&items).unwrap();
+    t.answers
         .iter()
-        .all(|a| board_answer(a).starts_with("model,")));
-    let s = st.reset().expect("reset");
-    check(&s, &c, 0, "command");
-    assert!(answered_by(&mut st).iter().all(|&x| x == id(&c)));
+        .map(|a| station::split_answer(board_answer(a)).unwrap().0)
+        .collect()
+}
 
-    // Malformed commands and upload lines: an error answer each, C still running.
-    let c_id = format!("{:08x}", id(&c));
+/// The board runs `model` from `slot`, and last started for `reset`.
+fn check_status(s: &BoardStatus, model: &[u8], slot: usize, reset: &str) {
+    assert_eq!(s.model, Some(station::model_id(model).unwrap()), "{s:?}");
+    assert_eq!(s.slot, Some(slot), "{s:?}");
+    assert_eq!(s.reset, reset, "{s:?}");
+}
+
+/// Malformed commands and upload lines: an error answer each, `c` still running.
+fn check_malformed_commands(st: &mut Station, c: &[u8], days: &[String]) {
+    let id = |m: &[u8]| station::model_id(m).unwrap();
+    let c_id = format!("{:08x}", id(c));
     let cases = [
         (
             "!model 18899".to_string(),
@@ -528,27 +585,34 @@ fn resets_keep_the_last_model_and_the_watchdog_resets_a_hung_board() {
         );
     }
     assert!(t.events.is_empty(), "{:?}", t.events);
-    assert!(answered_by(&mut st).iter().all(|&x| x == id(&c)));
+    assert!(answered_by(st, days).iter().all(|&x| x == id(c)));
+}
 
-    // A hung board: the watchdog resets it (NMI after 1 s without feeding, reset after 2 s);
-    // the days sent behind the hanging command are sent again and answered.
+/// A hung board: the watchdog resets it (NMI after 1 s without feeding, reset after 2 s); the
+/// days sent behind the hanging command are sent again and answered, by `c` from slot 0.
+fn check_watchdog_restart(st: &mut Station, c: &[u8], days: &[String]) {
     let mut items = vec![Item::Line("!hang".into())];
-    items.extend(day.iter().cloned().map(Item::Day));
+    items.extend(days.iter().cloned().map(Item::Day));
     let start = Instant::now();
     let t = st.run(&items).expect("a hang and a restart");
     let recovery = start.elapsed().as_secs_f64();
     assert_eq!(board_answer(&t.answers[0]), "hang");
     for a in &t.answers[1..] {
-        assert_eq!(station::split_answer(board_answer(a)).unwrap().0, id(&c));
+        assert_eq!(
+            station::split_answer(board_answer(a)).unwrap().0,
+            station::model_id(c).unwrap()
+        );
     }
     assert_eq!(t.events.len(), 1, "{:?}", t.events);
     match &t.events[0] {
-        (1, Event::Restarted(Some(s))) => check(s, &c, 0, "watchdog"),
+        (1, Event::Restarted(Some(s))) => check_status(s, c, 0, "watchdog"),
         other => panic!("expected a watchdog restart, got {other:?}"),
     }
     eprintln!("hung board back and answering after {recovery:.1} s");
+}
 
-    // Memory within the budget of memory-uart.x, after all of the above.
+/// Memory within the budget of memory-uart.x.
+fn check_memory(st: &mut Station) {
     let s = st.run(&[Item::Line("!status".into())]).unwrap();
     let status = BoardStatus::parse(board_answer(&s.answers[0])).unwrap();
     let field = |k: &str| -> usize {
@@ -570,6 +634,52 @@ fn resets_keep_the_last_model_and_the_watchdog_resets_a_hung_board() {
         field("stack") < field("stack_available"),
         "stack high-water mark"
     );
+}
+
+#[test]
+fn resets_keep_the_last_model_and_the_watchdog_resets_a_hung_board() {
+    if !toolchain_ready() {
+        return;
+    }
+    let (a, b, c) = (model(21), model(22), model(23));
+    let id = |m: &[u8]| station::model_id(m).unwrap();
+    let elf = build_deployable(&["hang-command"]).expect("building the deployable firmware");
+    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
+    let mut st = connect(&mut qemu);
+    let day = {
+        let m = Model::decode(&a).unwrap();
+        let (_, rows) = days(&m, "reset-days.csv");
+        station::day_lines(&rows[..8], false)
+            .into_iter()
+            .map(|l| l.unwrap())
+            .collect::<Vec<_>>()
+    };
+
+    // A into slot 0, B into slot 1, C into slot 0 again: each survives a reset.
+    for (m, slot) in [(&a, 0), (&b, 1), (&c, 0)] {
+        st.upload(m).expect("upload");
+        let s = st.reset().expect("reset");
+        check_status(&s, m, slot, "command");
+        assert!(answered_by(&mut st, &day).iter().all(|&x| x == id(m)));
+    }
+    // A refused upload and a half-done one leave C in use, before and after a reset.
+    let mut corrupt = a.clone();
+    corrupt[100] ^= 1;
+    assert!(st.upload(&corrupt).is_err());
+    let half = station::upload_lines(&b);
+    let t = st.run(&lines_of(half[..half.len() / 2].to_vec())).unwrap();
+    assert!(t
+        .answers
+        .iter()
+        .all(|a| board_answer(a).starts_with("model,")));
+    let s = st.reset().expect("reset");
+    check_status(&s, &c, 0, "command");
+    assert!(answered_by(&mut st, &day).iter().all(|&x| x == id(&c)));
+
+    check_malformed_commands(&mut st, &c, &day);
+    check_watchdog_restart(&mut st, &c, &day);
+    // Memory within the budget, after all of the above.
+    check_memory(&mut st);
 }
 
 #[test]

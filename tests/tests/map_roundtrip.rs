@@ -99,9 +99,9 @@ fn same_bits(a: &[Vec<f32>], b: &[Vec<f32>], what: &str) {
     }
 }
 
-#[test]
-fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
-    let f = fixture();
+/// `magic map --residual --preview` on the fixture image: the map's path (the preview must be
+/// written; `MAGIC_MAP_PNG` keeps it).
+fn map_through_the_cli(f: &Fixture) -> PathBuf {
     let out = f.dir.join("map.tif");
     let png = f.dir.join("lai.png");
     let m = f.model.to_str().unwrap();
@@ -125,8 +125,14 @@ fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
     if let Some(keep) = std::env::var_os("MAGIC_MAP_PNG") {
         std::fs::copy(&png, &keep).unwrap();
     }
+    out
+}
 
-    // The same spectra through `magic invert`.
+/// The map at `out` against the same spectra through `magic invert` (its CSV) and `invert_at`
+/// (f64), pixel by pixel; pixels without a spectrum are no data in every band, and nearly every
+/// pixel has all standard deviations.
+fn check_against_invert(f: &Fixture, out: &Path) {
+    let m = f.model.to_str().unwrap();
     let bytes = std::fs::read(&f.model).unwrap();
     let model = Model::decode(&bytes).unwrap();
     let bands = model_channels(&model).unwrap();
@@ -149,7 +155,7 @@ fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
     let names = band_names();
     assert_eq!(&header[..N_VARIABLES + 2], &names[..N_VARIABLES + 2]);
 
-    let (w, h, map) = read_map(&out);
+    let (w, h, map) = read_map(out);
     assert_eq!((w, h), (f.scene.width, f.scene.height));
     assert_eq!(map.len(), N_OUT);
     let mut ws = Workspace::default();
@@ -203,9 +209,13 @@ fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
         "standard deviations for only {with_sd} of {} pixels",
         pixels.len()
     );
+}
 
-    // GDAL: CRS, grid, band names, no-data value.
-    let info = gdalinfo(&out);
+/// GDAL reads the map at `out` with the input's CRS and grid, the band names and the no-data
+/// value.
+fn check_in_gdal(f: &Fixture, out: &Path) {
+    let names = band_names();
+    let info = gdalinfo(out);
     let src = gdalinfo(&f.image);
     assert_eq!(info["geoTransform"], src["geoTransform"], "grid");
     let gt: Vec<f64> = serde_json::from_value(info["geoTransform"].clone()).unwrap();
@@ -230,67 +240,68 @@ fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
 }
 
 #[test]
-fn every_layout_gives_the_same_map() {
+fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
     let f = fixture();
-    let base = base_map();
-    let variants: [(&str, &[&str]); 4] = [
-        (
-            "tiled_zstd_pixel_bigtiff",
-            &[
-                "-co",
-                "TILED=YES",
-                "-co",
-                "BLOCKXSIZE=64",
-                "-co",
-                "BLOCKYSIZE=16",
-                "-co",
-                "COMPRESS=ZSTD",
-                "-co",
-                "INTERLEAVE=PIXEL",
-                "-co",
-                "BIGTIFF=YES",
-            ],
-        ),
-        (
-            "striped_lzw_band",
-            &[
-                "-co",
-                "COMPRESS=LZW",
-                "-co",
-                "PREDICTOR=2",
-                "-co",
-                "INTERLEAVE=BAND",
-                "-co",
-                "BLOCKYSIZE=3",
-            ],
-        ),
-        (
-            "tiled_deflate_band",
-            &[
-                "-co",
-                "TILED=YES",
-                "-co",
-                "BLOCKXSIZE=32",
-                "-co",
-                "BLOCKYSIZE=32",
-                "-co",
-                "COMPRESS=DEFLATE",
-                "-co",
-                "INTERLEAVE=BAND",
-            ],
-        ),
-        ("striped_none_pixel", &["-co", "INTERLEAVE=PIXEL"]),
-    ];
-    for (name, args) in variants {
-        let img = f.dir.join(format!("{name}.tif"));
-        gdal_translate(&f.image, &img, args);
-        let out = f.dir.join(format!("{name}_map.tif"));
-        map::run(&options(&img, &out, false)).unwrap_or_else(|e| panic!("{name}: {e:#}"));
-        same_bits(&read_map(&out).2, &base.2, name);
-        eprintln!("{name}: same map");
-    }
+    let out = map_through_the_cli(f);
+    // The same spectra through `magic invert`.
+    check_against_invert(f, &out);
+    // GDAL: CRS, grid, band names, no-data value.
+    check_in_gdal(f, &out);
+}
 
-    // Float reflectance (NaN = no data), written by the crate's writer.
+/// The layouts GDAL writes the fixture image in (name, `gdal_translate` options).
+const LAYOUTS: [(&str, &[&str]); 4] = [
+    (
+        "tiled_zstd_pixel_bigtiff",
+        &[
+            "-co",
+            "TILED=YES",
+            "-co",
+            "BLOCKXSIZE=64",
+            "-co",
+            "BLOCKYSIZE=16",
+            "-co",
+            "COMPRESS=ZSTD",
+            "-co",
+            "INTERLEAVE=PIXEL",
+            "-co",
+            "BIGTIFF=YES",
+        ],
+    ),
+    (
+        "striped_lzw_band",
+        &[
+            "-co",
+            "COMPRESS=LZW",
+            "-co",
+            "PREDICTOR=2",
+            "-co",
+            "INTERLEAVE=BAND",
+            "-co",
+            "BLOCKYSIZE=3",
+        ],
+    ),
+    (
+        "tiled_deflate_band",
+        &[
+            "-co",
+            "TILED=YES",
+            "-co",
+            "BLOCKXSIZE=32",
+            "-co",
+            "BLOCKYSIZE=32",
+            "-co",
+            "COMPRESS=DEFLATE",
+            "-co",
+            "INTERLEAVE=BAND",
+        ],
+    ),
+    ("striped_none_pixel", &["-co", "INTERLEAVE=PIXEL"]),
+];
+
+/// The fixture's spectra as float reflectance (NaN = no data), band-interleaved, written by the
+/// crate's writer to `img`.
+fn write_float_reflectance(f: &Fixture, img: &Path) {
     let (w, h) = (f.scene.width, f.scene.height);
     let nb = f.scene.bands();
     let mut planes = vec![f32::NAN; nb * (w * h) as usize];
@@ -303,9 +314,8 @@ fn every_layout_gives_the_same_map() {
             }
         }
     }
-    let img = f.dir.join("float.tif");
     let mut wr = StripWriter::new(
-        std::fs::File::create(&img).unwrap(),
+        std::fs::File::create(img).unwrap(),
         TiffSpec {
             width: w,
             height: h,
@@ -328,11 +338,11 @@ fn every_layout_gives_the_same_map() {
     )
     .unwrap();
     wr.finish().unwrap();
-    let out = f.dir.join("float_map.tif");
-    map::run(&options(&img, &out, false)).unwrap();
-    same_bits(&read_map(&out).2, &base.2, "float reflectance");
+}
 
-    // A folder of one file per band, and a file with the bands in another order.
+/// A folder of one file per band, and a file with the bands in another order (`--bands`), give
+/// the map `base`.
+fn check_band_files(f: &Fixture, base: &[Vec<f32>]) {
     let folder = f.dir.join("bands");
     std::fs::create_dir_all(&folder).unwrap();
     let bytes = std::fs::read(&f.model).unwrap();
@@ -343,7 +353,7 @@ fn every_layout_gives_the_same_map() {
     }
     let out = f.dir.join("folder_map.tif");
     map::run(&options(&folder, &out, false)).unwrap();
-    same_bits(&read_map(&out).2, &base.2, "folder of bands");
+    same_bits(&read_map(&out).2, base, "folder of bands");
     let reversed = f.dir.join("reversed.tif");
     let mut args = Vec::new();
     for k in (1..=names.len()).rev() {
@@ -359,7 +369,31 @@ fn every_layout_gives_the_same_map() {
     let mut o = options(&reversed, &out, false);
     o.bands = Some(names.iter().rev().cloned().collect());
     map::run(&o).unwrap();
-    same_bits(&read_map(&out).2, &base.2, "--bands in reverse order");
+    same_bits(&read_map(&out).2, base, "--bands in reverse order");
+}
+
+#[test]
+fn every_layout_gives_the_same_map() {
+    let f = fixture();
+    let base = base_map();
+    for (name, args) in LAYOUTS {
+        let img = f.dir.join(format!("{name}.tif"));
+        gdal_translate(&f.image, &img, args);
+        let out = f.dir.join(format!("{name}_map.tif"));
+        map::run(&options(&img, &out, false)).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        same_bits(&read_map(&out).2, &base.2, name);
+        eprintln!("{name}: same map");
+    }
+
+    // Float reflectance (NaN = no data), written by the crate's writer.
+    let img = f.dir.join("float.tif");
+    write_float_reflectance(f, &img);
+    let out = f.dir.join("float_map.tif");
+    map::run(&options(&img, &out, false)).unwrap();
+    same_bits(&read_map(&out).2, &base.2, "float reflectance");
+
+    // A folder of one file per band, and a file with the bands in another order.
+    check_band_files(f, &base.2);
 }
 
 #[test]
@@ -421,13 +455,14 @@ fn the_scl_masks_its_classes() {
     let s = map::run(&o).unwrap();
     let (_, _, m) = read_map(&out);
     let masked = [0u8, 1, 3, 6, 8, 9, 10, 11];
+    assert!(m.len() >= N_OUT && base.2.len() >= N_OUT, "band count");
     for i in 0..(w * h) as usize {
         let c = classes[i];
-        for k in 0..N_OUT {
+        for (band, base_band) in m.iter().zip(&base.2).take(N_OUT) {
             if masked.contains(&c) {
-                assert!(m[k][i].is_nan(), "class {c} not masked");
+                assert!(band[i].is_nan(), "class {c} not masked");
             } else {
-                let (a, b) = (m[k][i], base.2[k][i]);
+                let (a, b) = (band[i], base_band[i]);
                 assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
             }
         }

@@ -170,17 +170,7 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
     check_model(&model).with_context(|| o.model.display().to_string())?;
     let bands = crate::data::records::model_channels(&model)?;
     let mut input = Input::open(&o.input, &bands, o.bands.as_deref(), o.offset)?;
-    let [x0, y0, w, h] = o.window.unwrap_or([0, 0, input.width, input.height]);
-    if x0.checked_add(w).is_none_or(|e| e > input.width)
-        || y0.checked_add(h).is_none_or(|e| e > input.height)
-    {
-        bail!(
-            "--window {x0},{y0},{w},{h} is not inside the {}×{} image {}",
-            input.width,
-            input.height,
-            o.input.display()
-        );
-    }
+    let [x0, y0, w, h] = checked_window(o, &input)?;
     let mut scl = match &o.scl {
         Some(p) => Some(Scl::open(p, input.width, input.height)?),
         None => None,
@@ -196,44 +186,146 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
         );
     }
     let mut summary = MapSummary::default();
+    let geo = window_georef(&input, x0, y0, &mut summary.warnings);
+    for wmsg in &summary.warnings {
+        eprintln!("warning: {wmsg}");
+    }
+    let sd_factors = sd_factors(o, &model, t_day)?;
+    let window_rows = o.window_rows.max(1);
+    let strip_rows = STRIP_ROWS.min(window_rows);
+    if !window_rows.is_multiple_of(strip_rows) {
+        bail!("{window_rows} rows per window: a multiple of {STRIP_ROWS} (or fewer) is needed");
+    }
+    let mut tags = geo.tags();
+    tags.push((
+        GDAL_METADATA,
+        TagValue::Ascii(gdal_metadata(&band_names(), &notes(o, &sd_factors))),
+    ));
+    tags.push((GDAL_NODATA, TagValue::Ascii("nan".into())));
+    let spec = TiffSpec {
+        width: w,
+        height: h,
+        bands: N_OUT as u16,
+        sample: Sample::F32,
+        planar: true,
+        rows_per_strip: strip_rows,
+        deflate: true,
+        big: None,
+        tags,
+    };
+    let partial = partial_path(&o.output);
+    let file = std::fs::File::create(&partial)
+        .with_context(|| format!("{}: cannot create", partial.display()))?;
+    let mut writer = StripWriter::new(BufWriter::with_capacity(1 << 20, file), spec)?;
+    summary.big = writer.is_big();
+
+    let cfg = PixelConfig {
+        residual: o.residual,
+        t_day,
+        sd_factors: sd_factors.clone(),
+    };
+    let nb = bands.len();
+    let bar = progress_bar(o.progress, w as u64 * h as u64);
+    let mut obs = Vec::new();
+    let mut pix = Vec::new();
+    let mut planes: Vec<u8> = Vec::new();
+    let mut r = 0;
+    while r < h {
+        let rows = window_rows.min(h - r);
+        let n = (rows * w) as usize;
+        input.read(x0, y0 + r, w, rows, &mut obs)?;
+        if let Some(s) = scl.as_mut() {
+            summary.masked += s.apply(x0, y0 + r, w, rows, nb, &mut obs)? as u64;
+        }
+        invert_window(&model, &cfg, (n, nb), &obs, &mut pix, &mut summary);
+        band_planes(&pix, n, &mut planes);
+        writer.write_rows(rows, &planes)?;
+        bar.inc(n as u64);
+        r += rows;
+    }
+    bar.finish_and_clear();
+    let out = writer.finish()?;
+    out.into_inner()
+        .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", partial.display()))?
+        .sync_all()
+        .ok();
+    std::fs::rename(&partial, &o.output).with_context(|| {
+        format!(
+            "cannot rename {} to {}",
+            partial.display(),
+            o.output.display()
+        )
+    })?;
+    summary.pixels = w as u64 * h as u64;
+    summary.sd_factors = if o.residual { sd_factors } else { vec![] };
+    if let Some(png) = &o.preview {
+        super::preview::render(&o.output, &o.preview_band, png)?;
+    }
+    summary.seconds = start.elapsed().as_secs_f64();
+    Ok(summary)
+}
+
+/// The window `x0, y0, width, height` to map (`--window`, or the whole image), checked to lie
+/// inside the image.
+fn checked_window(o: &MapOptions, input: &Input) -> Result<[u32; 4]> {
+    let [x0, y0, w, h] = o.window.unwrap_or([0, 0, input.width, input.height]);
+    if x0.checked_add(w).is_none_or(|e| e > input.width)
+        || y0.checked_add(h).is_none_or(|e| e > input.height)
+    {
+        bail!(
+            "--window {x0},{y0},{w},{h} is not inside the {}×{} image {}",
+            input.width,
+            input.height,
+            o.input.display()
+        );
+    }
+    Ok([x0, y0, w, h])
+}
+
+/// The map's georeference: the input's, moved to the window's origin; what cannot be kept is
+/// added to `warnings`.
+fn window_georef(input: &Input, x0: u32, y0: u32, warnings: &mut Vec<String>) -> GeoRef {
     let src_geo = &input.first().geo;
     if let Some(p) = src_geo.problem() {
-        summary.warnings.push(format!(
+        warnings.push(format!(
             "{}: {p}; the map keeps the pixel grid",
             input.first().path().display()
         ));
     }
     let (geo, dropped): (GeoRef, bool) = src_geo.window(x0, y0);
     if dropped {
-        summary.warnings.push(format!(
+        warnings.push(format!(
             "{}: tie points without a pixel size cannot be moved to the window: dropped",
             input.first().path().display()
         ));
     }
-    for wmsg in &summary.warnings {
-        eprintln!("warning: {wmsg}");
+    geo
+}
+
+/// The calibration factors of the standard deviations (1 when they are not computed or
+/// `--raw-sd` asks for the raw ones); the factors found are reported on stderr.
+fn sd_factors(o: &MapOptions, model: &Model<'_>, t_day: f64) -> Result<Vec<f64>> {
+    if !o.residual || o.raw_sd {
+        return Ok(vec![1.0; N_VARIABLES]);
     }
+    let f = calibrate::calibrate(model, t_day)?;
+    eprintln!(
+        "sd calibration ({} synthetic spectra, seed {:#x}): {}",
+        calibrate::CALIBRATION_SPECTRA,
+        calibrate::CALIBRATION_SEED,
+        band_names()[..N_VARIABLES]
+            .iter()
+            .zip(&f)
+            .map(|(n, k)| format!("{n} ×{k:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(f)
+}
 
-    // Calibration of the standard deviations.
-    let sd_factors = if o.residual && !o.raw_sd {
-        let f = calibrate::calibrate(&model, t_day)?;
-        eprintln!(
-            "sd calibration ({} synthetic spectra, seed {:#x}): {}",
-            calibrate::CALIBRATION_SPECTRA,
-            calibrate::CALIBRATION_SEED,
-            band_names()[..N_VARIABLES]
-                .iter()
-                .zip(&f)
-                .map(|(n, k)| format!("{n} ×{k:.3}"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        );
-        f
-    } else {
-        vec![1.0; N_VARIABLES]
-    };
-
-    let names = band_names();
+/// The notes of the GDAL metadata: the model, whether the residual was computed, the date, and
+/// each standard deviation's calibration factor (band, key, value; no band = the dataset's).
+fn notes(o: &MapOptions, sd_factors: &[f64]) -> Vec<(Option<usize>, String, String)> {
     let mut notes: Vec<(Option<usize>, String, String)> = vec![
         (
             None,
@@ -266,115 +358,63 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
             ));
         }
     }
-    let window_rows = o.window_rows.max(1);
-    let strip_rows = STRIP_ROWS.min(window_rows);
-    if !window_rows.is_multiple_of(strip_rows) {
-        bail!("{window_rows} rows per window: a multiple of {STRIP_ROWS} (or fewer) is needed");
-    }
-    let mut tags = geo.tags();
-    tags.push((
-        GDAL_METADATA,
-        TagValue::Ascii(gdal_metadata(&names, &notes)),
-    ));
-    tags.push((GDAL_NODATA, TagValue::Ascii("nan".into())));
-    let spec = TiffSpec {
-        width: w,
-        height: h,
-        bands: N_OUT as u16,
-        sample: Sample::F32,
-        planar: true,
-        rows_per_strip: strip_rows,
-        deflate: true,
-        big: None,
-        tags,
-    };
-    let partial = partial_path(&o.output);
-    let file = std::fs::File::create(&partial)
-        .with_context(|| format!("{}: cannot create", partial.display()))?;
-    let mut writer = StripWriter::new(BufWriter::with_capacity(1 << 20, file), spec)?;
-    summary.big = writer.is_big();
+    notes
+}
 
-    let cfg = PixelConfig {
-        residual: o.residual,
-        t_day,
-        sd_factors: sd_factors.clone(),
-    };
-    let nb = bands.len();
-    let bar = if o.progress {
-        let b = ProgressBar::new(w as u64 * h as u64);
-        b.set_style(
-            ProgressStyle::with_template(
-                "{bar:40} {percent:>3}% {human_pos}/{human_len} px, {per_sec}, ETA {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        b
-    } else {
-        ProgressBar::hidden()
-    };
-    let mut obs = Vec::new();
-    let mut pix = Vec::new();
-    let mut planes: Vec<u8> = Vec::new();
-    let mut r = 0;
-    while r < h {
-        let rows = window_rows.min(h - r);
-        let n = (rows * w) as usize;
-        input.read(x0, y0 + r, w, rows, &mut obs)?;
-        if let Some(s) = scl.as_mut() {
-            summary.masked += s.apply(x0, y0 + r, w, rows, nb, &mut obs)? as u64;
-        }
-        let t = Instant::now();
-        pix.resize(n * N_OUT, f32::NAN);
-        let outcomes: Vec<Outcome> = obs
-            .par_chunks(nb)
-            .zip(pix.par_chunks_mut(N_OUT))
-            .map_init(Scratch::default, |s, (o, out)| {
-                pixel(&model, o, &cfg, s, out)
-            })
-            .collect();
-        summary.compute_seconds += t.elapsed().as_secs_f64();
-        for oc in &outcomes {
-            match oc {
-                Outcome::NoData => summary.no_data += 1,
-                Outcome::Failed => summary.failed += 1,
-                Outcome::Inverted { sd: false } if o.residual => summary.sd_failed += 1,
-                Outcome::Inverted { .. } => {}
-            }
-        }
-        // Pixel-major → band planes of little-endian f32.
-        planes.resize(n * N_OUT * 4, 0);
-        planes
-            .par_chunks_mut(n * 4)
-            .enumerate()
-            .for_each(|(b, plane)| {
-                for (i, dst) in plane.chunks_exact_mut(4).enumerate() {
-                    dst.copy_from_slice(&pix[i * N_OUT + b].to_le_bytes());
-                }
-            });
-        writer.write_rows(rows, &planes)?;
-        bar.inc(n as u64);
-        r += rows;
+/// A progress bar over `pixels` (hidden unless `show`).
+fn progress_bar(show: bool, pixels: u64) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
     }
-    bar.finish_and_clear();
-    let out = writer.finish()?;
-    out.into_inner()
-        .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", partial.display()))?
-        .sync_all()
-        .ok();
-    std::fs::rename(&partial, &o.output).with_context(|| {
-        format!(
-            "cannot rename {} to {}",
-            partial.display(),
-            o.output.display()
+    let b = ProgressBar::new(pixels);
+    b.set_style(
+        ProgressStyle::with_template(
+            "{bar:40} {percent:>3}% {human_pos}/{human_len} px, {per_sec}, ETA {eta}",
         )
-    })?;
-    summary.pixels = w as u64 * h as u64;
-    summary.sd_factors = if o.residual { sd_factors } else { vec![] };
-    if let Some(png) = &o.preview {
-        super::preview::render(&o.output, &o.preview_band, png)?;
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    b
+}
+
+/// Inverts a window's `n` pixels (`obs`, `nb` bands each) in parallel into `pix` (pixel-major,
+/// [`N_OUT`] values each) and counts the outcomes and the compute time in `summary`.
+fn invert_window(
+    model: &Model<'_>,
+    cfg: &PixelConfig,
+    (n, nb): (usize, usize),
+    obs: &[f32],
+    pix: &mut Vec<f32>,
+    summary: &mut MapSummary,
+) {
+    let t = Instant::now();
+    pix.resize(n * N_OUT, f32::NAN);
+    let outcomes: Vec<Outcome> = obs
+        .par_chunks(nb)
+        .zip(pix.par_chunks_mut(N_OUT))
+        .map_init(Scratch::default, |s, (o, out)| pixel(model, o, cfg, s, out))
+        .collect();
+    summary.compute_seconds += t.elapsed().as_secs_f64();
+    for oc in &outcomes {
+        match oc {
+            Outcome::NoData => summary.no_data += 1,
+            Outcome::Failed => summary.failed += 1,
+            Outcome::Inverted { sd: false } if cfg.residual => summary.sd_failed += 1,
+            Outcome::Inverted { .. } => {}
+        }
     }
-    summary.seconds = start.elapsed().as_secs_f64();
-    Ok(summary)
+}
+
+/// Pixel-major values of `n` pixels → band planes of little-endian f32.
+fn band_planes(pix: &[f32], n: usize, planes: &mut Vec<u8>) {
+    planes.resize(n * N_OUT * 4, 0);
+    planes
+        .par_chunks_mut(n * 4)
+        .enumerate()
+        .for_each(|(b, plane)| {
+            for (i, dst) in plane.chunks_exact_mut(4).enumerate() {
+                dst.copy_from_slice(&pix[i * N_OUT + b].to_le_bytes());
+            }
+        });
 }
 
 /// Where the output is written until it is complete.

@@ -122,49 +122,7 @@ impl Raster {
                 path.display()
             );
         }
-        let color = dec
-            .colortype()
-            .map_err(|e| err(path, "unsupported pixel layout", e))?;
-        let (bits, bands) = match color {
-            ColorType::Gray(b) => (b, 1),
-            ColorType::Multiband {
-                bit_depth,
-                num_samples,
-            } => (bit_depth, num_samples),
-            ColorType::RGB(b) => (b, 3),
-            ColorType::RGBA(b) => (b, 4),
-            other => bail!(
-                "{}: colour type {other:?} is not a stack of bands (expected grey or multi-band samples)",
-                path.display()
-            ),
-        };
-        // One SampleFormat per sample (or one for all); mixed formats are not a stack of bands.
-        let formats = dec
-            .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
-            .map_err(|e| err(path, "bad SampleFormat tag", e))?
-            .unwrap_or_else(|| vec![1]);
-        if bands == 0 || bands > MAX_BANDS {
-            bail!(
-                "{}: {bands} samples per pixel (expected 1 to {MAX_BANDS} bands)",
-                path.display()
-            );
-        }
-        let format = formats.first().copied().unwrap_or(1);
-        if formats.iter().any(|&f| f != format) {
-            bail!(
-                "{}: samples of different formats ({formats:?}); expected one sample type for every band",
-                path.display()
-            );
-        }
-        let kind = match (SampleFormat::from_u16(format), bits) {
-            (Some(SampleFormat::Uint), 8 | 16 | 32) => SampleKind::Unsigned(bits),
-            (Some(SampleFormat::Int), 8 | 16 | 32) => SampleKind::Signed(bits),
-            (Some(SampleFormat::IEEEFP), 32 | 64) => SampleKind::Float(bits),
-            _ => bail!(
-                "{}: unsupported sample type (SampleFormat {format}, {bits} bits): expected 8-, 16- or 32-bit integers or 32- or 64-bit floats",
-                path.display()
-            ),
-        };
+        let (bits, bands, kind) = sample_layout(&mut dec, path)?;
         let planar = match dec
             .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
             .map_err(|e| err(path, "bad PlanarConfiguration tag", e))?
@@ -173,79 +131,12 @@ impl Raster {
             Some(PlanarConfiguration::Planar) => bands > 1,
             _ => false,
         };
-        let tiled = dec.get_chunk_type() == ChunkType::Tile;
-        let chunk = if tiled {
-            let tw = dec
-                .get_tag_u32(Tag::TileWidth)
-                .map_err(|e| err(path, "bad TileWidth", e))?;
-            let th = dec
-                .get_tag_u32(Tag::TileLength)
-                .map_err(|e| err(path, "bad TileLength", e))?;
-            (tw, th)
-        } else {
-            let rps = dec
-                .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
-                .map_err(|e| err(path, "bad RowsPerStrip", e))?
-                .unwrap_or(height);
-            (width, rps.min(height))
-        };
-        if chunk.0 == 0 || chunk.1 == 0 || chunk.0 > MAX_SIDE || chunk.1 > MAX_SIDE {
-            bail!(
-                "{}: chunks of {}×{} pixels (expected 1 to {MAX_SIDE} on each side)",
-                path.display(),
-                chunk.0,
-                chunk.1
-            );
-        }
-        let chunk_bytes = chunk.0 as u64
-            * chunk.1 as u64
-            * (bits as u64 / 8)
-            * if planar { 1 } else { bands as u64 };
-        if chunk_bytes > MAX_CHUNK_BYTES as u64 {
-            bail!(
-                "{}: one {} holds {chunk_bytes} bytes (at most {MAX_CHUNK_BYTES} are decoded at once)",
-                path.display(),
-                if tiled { "tile" } else { "strip" }
-            );
-        }
+        let (tiled, chunk) = chunk_layout(&mut dec, path, (width, height), bits, bands, planar)?;
         let across = width.div_ceil(chunk.0);
         let per_plane = across * height.div_ceil(chunk.1);
         let planes = if planar { bands as u32 } else { 1 };
-        let expected = per_plane as u64 * planes as u64;
-        let offsets = if tiled {
-            Tag::TileOffsets
-        } else {
-            Tag::StripOffsets
-        };
-        let counts = if tiled {
-            Tag::TileByteCounts
-        } else {
-            Tag::StripByteCounts
-        };
-        for t in [offsets, counts] {
-            let n = dec
-                .get_tag_u64_vec(t)
-                .map_err(|e| err(path, &format!("bad {t:?} tag"), e))?
-                .len() as u64;
-            if n < expected {
-                bail!(
-                    "{}: {n} entries in {t:?} for {expected} {}s: the file is truncated or corrupt",
-                    path.display(),
-                    if tiled { "tile" } else { "strip" }
-                );
-            }
-        }
-        let nodata = match dec.find_tag(Tag::GdalNodata) {
-            Ok(Some(tiff::decoder::ifd::Value::Ascii(s))) => {
-                let s = s.trim_matches(char::from(0)).trim();
-                match s.parse::<f64>() {
-                    Ok(v) => Some(v),
-                    Err(_) if s.eq_ignore_ascii_case("nan") => Some(f64::NAN),
-                    Err(_) => bail!("{}: GDAL_NODATA `{s}` is not a number", path.display()),
-                }
-            }
-            _ => None,
-        };
+        check_chunk_tables(&mut dec, path, tiled, per_plane as u64 * planes as u64)?;
+        let nodata = gdal_nodata(&mut dec, path)?;
         let geo = GeoRef::read(&mut dec).map_err(|e| err(path, "bad GeoTIFF tags", e))?;
         Ok(Raster {
             path: path.to_path_buf(),
@@ -350,6 +241,150 @@ impl Raster {
         }
         Ok(())
     }
+}
+
+/// The file's samples: bits per sample, samples per pixel (bands) and their type, checked to be
+/// one stack of bands of one supported type.
+fn sample_layout(dec: &mut Decoder<BufReader<File>>, path: &Path) -> Result<(u8, u16, SampleKind)> {
+    let color = dec
+        .colortype()
+        .map_err(|e| err(path, "unsupported pixel layout", e))?;
+    let (bits, bands) = match color {
+        ColorType::Gray(b) => (b, 1),
+        ColorType::Multiband {
+            bit_depth,
+            num_samples,
+        } => (bit_depth, num_samples),
+        ColorType::RGB(b) => (b, 3),
+        ColorType::RGBA(b) => (b, 4),
+        other => bail!(
+            "{}: colour type {other:?} is not a stack of bands (expected grey or multi-band samples)",
+            path.display()
+        ),
+    };
+    // One SampleFormat per sample (or one for all); mixed formats are not a stack of bands.
+    let formats = dec
+        .find_tag_unsigned_vec::<u16>(Tag::SampleFormat)
+        .map_err(|e| err(path, "bad SampleFormat tag", e))?
+        .unwrap_or_else(|| vec![1]);
+    if bands == 0 || bands > MAX_BANDS {
+        bail!(
+            "{}: {bands} samples per pixel (expected 1 to {MAX_BANDS} bands)",
+            path.display()
+        );
+    }
+    let format = formats.first().copied().unwrap_or(1);
+    if formats.iter().any(|&f| f != format) {
+        bail!(
+            "{}: samples of different formats ({formats:?}); expected one sample type for every band",
+            path.display()
+        );
+    }
+    let kind = match (SampleFormat::from_u16(format), bits) {
+        (Some(SampleFormat::Uint), 8 | 16 | 32) => SampleKind::Unsigned(bits),
+        (Some(SampleFormat::Int), 8 | 16 | 32) => SampleKind::Signed(bits),
+        (Some(SampleFormat::IEEEFP), 32 | 64) => SampleKind::Float(bits),
+        _ => bail!(
+            "{}: unsupported sample type (SampleFormat {format}, {bits} bits): expected 8-, 16- or 32-bit integers or 32- or 64-bit floats",
+            path.display()
+        ),
+    };
+    Ok((bits, bands, kind))
+}
+
+/// Whether the image is tiled, and its chunk (tile or strip) width and height, checked against
+/// [`MAX_SIDE`] and [`MAX_CHUNK_BYTES`].
+fn chunk_layout(
+    dec: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    (width, height): (u32, u32),
+    bits: u8,
+    bands: u16,
+    planar: bool,
+) -> Result<(bool, (u32, u32))> {
+    let tiled = dec.get_chunk_type() == ChunkType::Tile;
+    let chunk = if tiled {
+        let tw = dec
+            .get_tag_u32(Tag::TileWidth)
+            .map_err(|e| err(path, "bad TileWidth", e))?;
+        let th = dec
+            .get_tag_u32(Tag::TileLength)
+            .map_err(|e| err(path, "bad TileLength", e))?;
+        (tw, th)
+    } else {
+        let rps = dec
+            .find_tag_unsigned::<u32>(Tag::RowsPerStrip)
+            .map_err(|e| err(path, "bad RowsPerStrip", e))?
+            .unwrap_or(height);
+        (width, rps.min(height))
+    };
+    if chunk.0 == 0 || chunk.1 == 0 || chunk.0 > MAX_SIDE || chunk.1 > MAX_SIDE {
+        bail!(
+            "{}: chunks of {}×{} pixels (expected 1 to {MAX_SIDE} on each side)",
+            path.display(),
+            chunk.0,
+            chunk.1
+        );
+    }
+    let chunk_bytes =
+        chunk.0 as u64 * chunk.1 as u64 * (bits as u64 / 8) * if planar { 1 } else { bands as u64 };
+    if chunk_bytes > MAX_CHUNK_BYTES as u64 {
+        bail!(
+            "{}: one {} holds {chunk_bytes} bytes (at most {MAX_CHUNK_BYTES} are decoded at once)",
+            path.display(),
+            if tiled { "tile" } else { "strip" }
+        );
+    }
+    Ok((tiled, chunk))
+}
+
+/// Checks that the offset and byte-count tables list at least the `expected` chunks (the
+/// decoder panics on a chunk index past their end).
+fn check_chunk_tables(
+    dec: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    tiled: bool,
+    expected: u64,
+) -> Result<()> {
+    let offsets = if tiled {
+        Tag::TileOffsets
+    } else {
+        Tag::StripOffsets
+    };
+    let counts = if tiled {
+        Tag::TileByteCounts
+    } else {
+        Tag::StripByteCounts
+    };
+    for t in [offsets, counts] {
+        let n = dec
+            .get_tag_u64_vec(t)
+            .map_err(|e| err(path, &format!("bad {t:?} tag"), e))?
+            .len() as u64;
+        if n < expected {
+            bail!(
+                "{}: {n} entries in {t:?} for {expected} {}s: the file is truncated or corrupt",
+                path.display(),
+                if tiled { "tile" } else { "strip" }
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The no-data value of the GDAL_NODATA tag (a number or `nan`), if the file has one.
+fn gdal_nodata(dec: &mut Decoder<BufReader<File>>, path: &Path) -> Result<Option<f64>> {
+    Ok(match dec.find_tag(Tag::GdalNodata) {
+        Ok(Some(tiff::decoder::ifd::Value::Ascii(s))) => {
+            let s = s.trim_matches(char::from(0)).trim();
+            match s.parse::<f64>() {
+                Ok(v) => Some(v),
+                Err(_) if s.eq_ignore_ascii_case("nan") => Some(f64::NAN),
+                Err(_) => bail!("{}: GDAL_NODATA `{s}` is not a number", path.display()),
+            }
+        }
+        _ => None,
+    })
 }
 
 fn result_len(d: &DecodingResult) -> usize {

@@ -260,6 +260,17 @@ impl<W: Write + Seek> StripWriter<W> {
         if !self.big && self.pos > u32::MAX as u64 {
             bail!("the image passed 4 GiB in a classic TIFF: write a BigTIFF");
         }
+        let tags = self.directory_tags()?;
+        let entries = self.write_values(&tags)?;
+        self.write_directory(&entries)?;
+        self.out.flush()?;
+        Ok(self.out)
+    }
+
+    /// The directory's tags, sorted by number: the image's own and the spec's extra ones (tag,
+    /// value, and for a BigTIFF's strip offsets and byte counts their LONG8 bytes).
+    fn directory_tags(&self) -> Result<Vec<DirTag>> {
+        let s = &self.spec;
         let b = s.bands as usize;
         let offsets = |v: &[u64]| -> TagValue {
             if self.big {
@@ -268,7 +279,7 @@ impl<W: Write + Seek> StripWriter<W> {
                 TagValue::Long(v.iter().map(|&x| x as u32).collect())
             }
         };
-        let mut tags: Vec<(u16, TagValue, Option<Vec<u8>>)> = vec![
+        let mut tags: Vec<DirTag> = vec![
             (256, TagValue::Long(vec![s.width]), None),
             (257, TagValue::Long(vec![s.height]), None),
             (
@@ -314,11 +325,15 @@ impl<W: Write + Seek> StripWriter<W> {
             tags.push((*tag, v.clone(), None));
         }
         tags.sort_by_key(|t| t.0);
+        Ok(tags)
+    }
 
-        // Out-of-line values first, then the directory (word aligned).
+    /// Writes the values that do not fit in their directory entry (word aligned); returns the
+    /// entries: tag, type, count and the inline value or the offset of the written one.
+    fn write_values(&mut self, tags: &[DirTag]) -> Result<Vec<DirEntry>> {
         let inline = if self.big { 8 } else { 4 };
         let mut entries = Vec::with_capacity(tags.len());
-        for (tag, v, raw) in &tags {
+        for (tag, v, raw) in tags {
             let (ty, count, bytes) = match raw {
                 Some(r) => (16u16, (r.len() / 8) as u64, r.clone()),
                 None => (v.type_code(), v.count(), v.bytes()),
@@ -346,6 +361,11 @@ impl<W: Write + Seek> StripWriter<W> {
             };
             entries.push((*tag, ty, count, field));
         }
+        Ok(entries)
+    }
+
+    /// Writes the directory (word aligned) after the values and points the header at it.
+    fn write_directory(&mut self, entries: &[DirEntry]) -> Result<()> {
         if self.pos % 2 == 1 {
             self.out.write_all(&[0])?;
             self.pos += 1;
@@ -357,7 +377,7 @@ impl<W: Write + Seek> StripWriter<W> {
         } else {
             d.extend((entries.len() as u16).to_le_bytes());
         }
-        for (tag, ty, count, field) in &entries {
+        for (tag, ty, count, field) in entries {
             d.extend(tag.to_le_bytes());
             d.extend(ty.to_le_bytes());
             if self.big {
@@ -377,10 +397,16 @@ impl<W: Write + Seek> StripWriter<W> {
             self.out.seek(SeekFrom::Start(4))?;
             self.out.write_all(&at.to_le_bytes())?;
         }
-        self.out.flush()?;
-        Ok(self.out)
+        Ok(())
     }
 }
+
+/// A directory tag: number, value, and the raw LONG8 bytes that replace the value (BigTIFF strip
+/// offsets and byte counts).
+type DirTag = (u16, TagValue, Option<Vec<u8>>);
+
+/// A directory entry: tag, type, count, and the value's bytes or the offset where it is written.
+type DirEntry = (u16, u16, u64, Vec<u8>);
 
 /// zlib level of the deflated strips: the fastest (a map of a 10 980² tile deflates 9.6 GB, and
 /// its NaN bands compress to almost nothing at any level).

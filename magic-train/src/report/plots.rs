@@ -16,6 +16,7 @@
 //! is.
 
 use anyhow::{anyhow, bail, Context, Result};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -363,22 +364,7 @@ pub fn station_map(
             values.len()
         );
     }
-    let (mut x0, mut x1) = range(stations.iter().map(|s| s.1), 0.15)
-        .with_context(|| format!("station map `{title}`: no finite position"))?;
-    let (mut y0, mut y1) = range(stations.iter().map(|s| s.2), 0.15)
-        .with_context(|| format!("station map `{title}`: no finite position"))?;
-    // Equal scales on both axes: widen the shorter span.
-    let (w, h) = (x1 - x0, y1 - y0);
-    let (plot_w, plot_h) = (780.0, 600.0);
-    if w / plot_w > h / plot_h {
-        let extra = (w * plot_h / plot_w - h) / 2.0;
-        y0 -= extra;
-        y1 += extra;
-    } else {
-        let extra = (h * plot_w / plot_h - w) / 2.0;
-        x0 -= extra;
-        x1 += extra;
-    }
+    let [x0, x1, y0, y1] = map_extent(title, stations)?;
     let root = area(path, (900, 720))?;
     let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());
     let (map, legend) = root.split_horizontally(800);
@@ -415,18 +401,92 @@ pub fn station_map(
         0.0
     };
     // Arrows first, stations on top.
+    draw_arrows(
+        &mut chart,
+        path,
+        stations,
+        vectors,
+        arrow_scale,
+        (x1 - x0) / 60.0,
+    )?;
+    draw_stations(&mut chart, path, stations, values, vmax)?;
+
+    // Legend column: the colour scale and the arrow scale.
+    if !values.is_empty() {
+        colour_scale(&legend, path, vmax)?;
+    }
+    if lmax > 0.0 {
+        // An arrow of a round length, drawn at the map's scale.
+        let nice = nice_length(lmax / 2.0);
+        let px_per_km = 780.0 / (x1 - x0);
+        let len_px = (nice * arrow_scale * px_per_km).round() as i32;
+        arrow_legend(&legend, path, nice, len_px)?;
+    }
+    finish(root, path)
+}
+
+/// A station map's chart: km east and north on the plotting area of a bitmap.
+type MapChart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The map's extent `[x0, x1, y0, y1]` (km): the stations with a margin, the shorter span widened
+/// so both axes have the same scale on the plotting area.
+fn map_extent(title: &str, stations: &[(String, f64, f64)]) -> Result<[f64; 4]> {
+    let (mut x0, mut x1) = range(stations.iter().map(|s| s.1), 0.15)
+        .with_context(|| format!("station map `{title}`: no finite position"))?;
+    let (mut y0, mut y1) = range(stations.iter().map(|s| s.2), 0.15)
+        .with_context(|| format!("station map `{title}`: no finite position"))?;
+    // Equal scales on both axes: widen the shorter span.
+    let (w, h) = (x1 - x0, y1 - y0);
+    let (plot_w, plot_h) = (780.0, 600.0);
+    if w / plot_w > h / plot_h {
+        let extra = (w * plot_h / plot_w - h) / 2.0;
+        y0 -= extra;
+        y1 += extra;
+    } else {
+        let extra = (h * plot_w / plot_h - w) / 2.0;
+        x0 -= extra;
+        x1 += extra;
+    }
+    Ok([x0, x1, y0, y1])
+}
+
+/// One arrow per station from its position along its vector times `scale` (`head`: length of
+/// the arrow heads, km); vectors of zero or non-finite length are left out.
+fn draw_arrows(
+    chart: &mut MapChart<'_, '_>,
+    path: &Path,
+    stations: &[(String, f64, f64)],
+    vectors: &[(f64, f64)],
+    scale: f64,
+    head: f64,
+) -> Result<()> {
+    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());
     for (k, &(ve, vn)) in vectors.iter().enumerate() {
         let (_, sx, sy) = &stations[k];
-        let (dx, dy) = (ve * arrow_scale, vn * arrow_scale);
+        let (dx, dy) = (ve * scale, vn * scale);
         if !(dx.is_finite() && dy.is_finite() && sx.is_finite() && sy.is_finite())
             || dx.hypot(dy) == 0.0
         {
             continue;
         }
         chart
-            .draw_series(arrow((*sx, *sy), (sx + dx, sy + dy), (x1 - x0) / 60.0))
+            .draw_series(arrow((*sx, *sy), (sx + dx, sy + dy), head))
             .map_err(|e| err(&e))?;
     }
+    Ok(())
+}
+
+/// A marker per station, coloured by its value on the scale ±`vmax` (grey without values), and
+/// its label: the name and the value.
+fn draw_stations(
+    chart: &mut MapChart<'_, '_>,
+    path: &Path,
+    stations: &[(String, f64, f64)],
+    values: &[f64],
+    vmax: f64,
+) -> Result<()> {
+    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());
     for (k, (name, sx, sy)) in stations.iter().enumerate() {
         if !(sx.is_finite() && sy.is_finite()) {
             continue;
@@ -457,65 +517,77 @@ pub fn station_map(
             .draw_series([EmptyElement::at((*sx, *sy)) + text])
             .map_err(|e| err(&e))?;
     }
+    Ok(())
+}
 
-    // Legend column: the colour scale and the arrow scale.
+/// The legend's colour scale from `vmax` (top) through 0 to −`vmax` (bottom).
+fn colour_scale(
+    legend: &DrawingArea<BitMapBackend<'_>, Shift>,
+    path: &Path,
+    vmax: f64,
+) -> Result<()> {
+    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());
     let style = |s: u32| (FONT, s).into_font().color(&BLACK);
-    if !values.is_empty() {
-        legend
-            .draw(&Text::new("value", (8, 60), style(14)))
-            .map_err(|e| err(&e))?;
-        let (top, bottom) = (90, 330);
-        for py in top..bottom {
-            let v = vmax * (1.0 - 2.0 * (py - top) as f64 / (bottom - top) as f64);
-            legend
-                .draw(&Rectangle::new(
-                    [(10, py), (34, py + 1)],
-                    diverging(v, vmax).filled(),
-                ))
-                .map_err(|e| err(&e))?;
-        }
+    legend
+        .draw(&Text::new("value", (8, 60), style(14)))
+        .map_err(|e| err(&e))?;
+    let (top, bottom) = (90, 330);
+    for py in top..bottom {
+        let v = vmax * (1.0 - 2.0 * (py - top) as f64 / (bottom - top) as f64);
         legend
             .draw(&Rectangle::new(
-                [(10, top), (34, bottom)],
-                BLACK.stroke_width(1),
+                [(10, py), (34, py + 1)],
+                diverging(v, vmax).filled(),
             ))
-            .map_err(|e| err(&e))?;
-        for (py, v) in [(top, vmax), ((top + bottom) / 2, 0.0), (bottom, -vmax)] {
-            legend
-                .draw(&Text::new(format!("{v:.2}"), (40, py - 7), style(13)))
-                .map_err(|e| err(&e))?;
-        }
-    }
-    if lmax > 0.0 {
-        // An arrow of a round length, drawn at the map's scale.
-        let nice = nice_length(lmax / 2.0);
-        let px_per_km = 780.0 / (x1 - x0);
-        let len_px = (nice * arrow_scale * px_per_km).round() as i32;
-        let y = 400;
-        legend
-            .draw(&Text::new("arrow", (8, y - 30), style(14)))
-            .map_err(|e| err(&e))?;
-        legend
-            .draw(&PathElement::new(
-                vec![(10, y), (10 + len_px, y)],
-                BLACK.stroke_width(2),
-            ))
-            .map_err(|e| err(&e))?;
-        legend
-            .draw(&PathElement::new(
-                vec![
-                    (10 + len_px - 6, y - 4),
-                    (10 + len_px, y),
-                    (10 + len_px - 6, y + 4),
-                ],
-                BLACK.stroke_width(2),
-            ))
-            .map_err(|e| err(&e))?;
-        legend
-            .draw(&Text::new(format!("{nice}"), (10, y + 10), style(13)))
             .map_err(|e| err(&e))?;
     }
-    finish(root, path)
+    legend
+        .draw(&Rectangle::new(
+            [(10, top), (34, bottom)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(|e| err(&e))?;
+    for (py, v) in [(top, vmax), ((top + bottom) / 2, 0.0), (bottom, -vmax)] {
+        legend
+            .draw(&Text::new(format!("{v:.2}"), (40, py - 7), style(13)))
+            .map_err(|e| err(&e))?;
+    }
+    Ok(())
+}
+
+/// The legend's arrow scale: an arrow `len_px` pixels long, labelled with its length `nice`.
+fn arrow_legend(
+    legend: &DrawingArea<BitMapBackend<'_>, Shift>,
+    path: &Path,
+    nice: f64,
+    len_px: i32,
+) -> Result<()> {
+    let err = |e: &dyn std::fmt::Display| anyhow!("{}: {e}", path.display());
+    let style = |s: u32| (FONT, s).into_font().color(&BLACK);
+    let y = 400;
+    legend
+        .draw(&Text::new("arrow", (8, y - 30), style(14)))
+        .map_err(|e| err(&e))?;
+    legend
+        .draw(&PathElement::new(
+            vec![(10, y), (10 + len_px, y)],
+            BLACK.stroke_width(2),
+        ))
+        .map_err(|e| err(&e))?;
+    legend
+        .draw(&PathElement::new(
+            vec![
+                (10 + len_px - 6, y - 4),
+                (10 + len_px, y),
+                (10 + len_px - 6, y + 4),
+            ],
+            BLACK.stroke_width(2),
+        ))
+        .map_err(|e| err(&e))?;
+    legend
+        .draw(&Text::new(format!("{nice}"), (10, y + 10), style(13)))
+        .map_err(|e| err(&e))?;
+    Ok(())
 }
 
 /// 1, 2 or 5 times a power of ten, at most `v`.
