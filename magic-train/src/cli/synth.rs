@@ -6,7 +6,9 @@ use crate::analysis::AnalysisOptions;
 use crate::closed_loop::{self, LoopOptions};
 use crate::data::SplitName;
 use crate::gnss::data::write_dir;
+use crate::gnss::recovery::coverage::Coverage;
 use crate::gnss::recovery::{check_one, recovery_table};
+use crate::gnss::synth::truth::injected;
 use crate::gnss::synth::{self, NoiseModel, Scenario, Spec};
 use crate::problem::Problem;
 use anyhow::Result;
@@ -130,6 +132,7 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
     let cfg = crate::train::TrainConfig::gnss().with(a.epochs, true);
     let opts = AnalysisOptions::default();
     let (mut rows, mut out) = (Vec::new(), Vec::new());
+    let mut coverage = Coverage::default();
     let start = std::time::Instant::now();
     for spec in specs(&scenarios(&a.scenarios), &a.noise, &a.placement, 0) {
         for seed in a.first_seed..a.first_seed + a.seeds {
@@ -147,11 +150,19 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
                 if r.ok() { "ok  " } else { "FAIL" },
                 r.detail()
             );
+            let truth = spec.generate().truth;
+            coverage.add(&an, &injected(&truth), &r.noise);
             out.push(json!({"recovery": r.to_json(), "seconds": secs, "analysis": an.to_json()}));
             rows.push(r);
         }
     }
-    let table = recovery_table(&rows);
+    let mut table = recovery_table(&rows);
+    if !coverage.is_empty() {
+        table.push_str(
+            "\nBootstrap standard deviations against the truth (significant candidates):\n\n",
+        );
+        table.push_str(&coverage.table());
+    }
     print!("{table}");
     eprintln!(
         "{} analyses in {:.0} s",

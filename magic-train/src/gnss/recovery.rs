@@ -420,5 +420,7 @@ pub fn recovery_table(rows: &[Recovery]) -> String {
     s
 }
 
+pub mod coverage;
+
 #[cfg(test)]
 mod tests;

@@ -1,0 +1,151 @@
+//! Calibration of the bootstrap standard deviations on synthetic data: for every significant
+//! candidate of an injected family that carries an uncertainty, the share of its key parameters
+//! whose true value lies within ±1 and ±2 standard deviations (about 68 % and 95 % if the sds tell
+//! the truth). A step counts only at the right station (another station's offsets say nothing).
+
+use crate::analysis::Analysis;
+use crate::data::dataset::day_number;
+use crate::gnss::synth::truth::Injected;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+/// Counts per (family, parameter, noise model): draws, within ±1 sd, within ±2 sd.
+#[derive(Clone, Debug, Default)]
+pub struct Coverage {
+    rows: BTreeMap<(String, String, String), [usize; 3]>,
+}
+
+/// The true value of a key parameter (as the families name them) from the injected parameters.
+///
+/// ```
+/// use magic_train::gnss::recovery::coverage::truth_value;
+/// let p = serde_json::json!({"offset_mm": [1.0, -2.0, 3.5], "epoch": "1970-01-11"});
+/// assert_eq!(truth_value("offset_u_mm", &p), Some(3.5));
+/// assert_eq!(truth_value("epoch_day", &p), Some(10.0));
+/// assert_eq!(truth_value("rms_n_mm", &p), None);
+/// ```
+pub fn truth_value(param: &str, truth: &Value) -> Option<f64> {
+    let component = |name: &str, k: usize| truth.get(name)?.get(k)?.as_f64();
+    let axis = |s: &str| ["e", "n", "u"].iter().position(|a| *a == s);
+    if let Some(rest) = param
+        .strip_prefix("offset_")
+        .and_then(|r| r.strip_suffix("_mm"))
+    {
+        return component("offset_mm", axis(rest)?);
+    }
+    if let Some(rest) = param
+        .strip_prefix("rms_")
+        .and_then(|r| r.strip_suffix("_mm"))
+    {
+        return component("rms_mm", axis(rest)?);
+    }
+    if param == "epoch_day" {
+        let d = day_number(truth.get("epoch")?.as_str()?);
+        return d.is_finite().then_some(d);
+    }
+    truth.get(param)?.as_f64()
+}
+
+impl Coverage {
+    /// Adds the analysis of one synthetic dataset (its injected effects, its noise model).
+    pub fn add(&mut self, analysis: &Analysis, injected: &[Injected], noise: &str) {
+        for inj in injected {
+            let Some(c) = analysis
+                .effects
+                .iter()
+                .find(|c| c.family == inj.family && c.significant)
+            else {
+                continue;
+            };
+            if inj.family == "step" && c.params.get("station") != inj.params.get("station") {
+                continue;
+            }
+            for p in &c.uncertainty {
+                let Some(truth) = truth_value(&p.name, &inj.params) else {
+                    continue;
+                };
+                if p.sd.is_nan() || p.sd <= 0.0 {
+                    continue;
+                }
+                let z = (p.value - truth).abs() / p.sd;
+                let key = (inj.family.clone(), p.name.clone(), noise.to_string());
+                let row = self.rows.entry(key).or_default();
+                row[0] += 1;
+                row[1] += usize::from(z <= 1.0);
+                row[2] += usize::from(z <= 2.0);
+            }
+        }
+    }
+
+    /// The Markdown table: family, parameter, noise model, draws, shares within ±1 and ±2 sd.
+    pub fn table(&self) -> String {
+        let mut s = String::from(
+            "| family | parameter | noise | n | within ±1 sd | within ±2 sd |\n|---|---|---|---|---|---|\n",
+        );
+        for ((family, param, noise), [n, one, two]) in &self.rows {
+            let pct = |k: usize| 100.0 * k as f64 / (*n).max(1) as f64;
+            let _ = writeln!(
+                s,
+                "| {family} | {param} | {noise} | {n} | {:.0} % | {:.0} % |",
+                pct(*one),
+                pct(*two)
+            );
+        }
+        s
+    }
+
+    /// Whether nothing was counted.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::{Candidate, ParamSd};
+    use serde_json::json;
+
+    fn analysis(station: &str, value: f64, sd: f64) -> Analysis {
+        let mut c = Candidate::from_scores(
+            "step",
+            0.5,
+            vec![0.0; 20],
+            0.95,
+            json!({"station": station}),
+            None,
+        );
+        c.uncertainty = vec![ParamSd {
+            name: "offset_u_mm".into(),
+            value,
+            sd,
+        }];
+        Analysis {
+            problem: "mogi",
+            splits: vec![],
+            effects: vec![c],
+            residuals: json!({}),
+            summary: String::new(),
+            seconds: 0.0,
+        }
+    }
+
+    #[test]
+    fn counts_within_one_and_two_sd_at_the_right_station_only() {
+        let truth = [Injected::new(
+            "step",
+            json!({"station": "AV13", "offset_mm": [0.0, 0.0, 10.0]}),
+        )];
+        let mut c = Coverage::default();
+        c.add(&analysis("AV13", 10.5, 1.0), &truth, "paper"); // within 1
+        c.add(&analysis("AV13", 11.5, 1.0), &truth, "paper"); // within 2
+        c.add(&analysis("AV13", 13.0, 1.0), &truth, "paper"); // beyond 2
+        c.add(&analysis("AV06", 10.0, 1.0), &truth, "paper"); // wrong station: not counted
+        let t = c.table();
+        assert!(
+            t.contains("| step | offset_u_mm | paper | 3 | 33 % | 67 % |"),
+            "{t}"
+        );
+    }
+}
