@@ -144,17 +144,9 @@ impl Owned {
     fn tables(&self) -> Tables<'_> {
         let c = &self.cols;
         Tables {
-            prospect: Coefficients {
-                nr: &c[0],
-                k_cab: &c[1],
-                k_car: &c[2],
-                k_anth: &c[3],
-                k_brown: &c[4],
-                k_cw: &c[5],
-                k_cm: &c[6],
-                t12: &c[7],
-                tav90n: &c[8],
-            },
+            prospect: Coefficients::from_columns(
+                c[..9].try_into().expect("the nine PROSPECT columns first"),
+            ),
             soil_dry: &c[9],
             soil_wet: &c[10],
             es: &c[11],

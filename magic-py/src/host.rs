@@ -63,6 +63,10 @@ pub fn tables_from_parts(
     lidf_beta: Vec<f64>,
     resampling: Vec<f64>,
 ) -> Result<TableData, String> {
+    let n = prospect.len();
+    let prospect: [Vec<f64>; 9] = prospect
+        .try_into()
+        .map_err(|_| format!("expected 9 PROSPECT columns, found {n}"))?;
     let t = RtmTables {
         dir,
         wl,

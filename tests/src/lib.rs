@@ -146,6 +146,16 @@ pub fn magic_bin() -> PathBuf {
     .clone()
 }
 
+/// SplitMix64 (Steele, Lea and Flood): the next value of the generator whose state is `state`.
+/// Tiny, fast and deterministic: the fuzz tests' case generator.
+pub fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
 /// A temporary folder, removed on drop (also when the test fails).
 pub struct TempDir(pub PathBuf);
 

@@ -109,7 +109,7 @@ impl Csv {
 
 /// Owned copies of the tables, lent to the model as [`Tables`].
 struct OwnedTables {
-    cols: Vec<Vec<f64>>, // 9 prospect columns
+    cols: [Vec<f64>; 9],
     soil_dry: Vec<f64>,
     soil_wet: Vec<f64>,
     es: Vec<f64>,
@@ -124,9 +124,7 @@ impl OwnedTables {
         let cols = [
             "nr", "k_cab", "k_car", "k_anth", "k_brown", "k_cw", "k_cm", "t12", "tav90n",
         ]
-        .iter()
-        .map(|c| p.column(c))
-        .collect();
+        .map(|c| p.column(c));
         let soil = Csv::read(dir.join("rtm/soil_spectra.csv"));
         let sun = Csv::read(dir.join("rtm/solar_spectra.csv"));
         let lidf = Csv::read(dir.join("rtm/lidf_tables.csv"));
@@ -155,17 +153,7 @@ impl OwnedTables {
     }
     fn coefficients(&self) -> Coefficients<'_> {
         let c = &self.cols;
-        Coefficients {
-            nr: &c[0],
-            k_cab: &c[1],
-            k_car: &c[2],
-            k_anth: &c[3],
-            k_brown: &c[4],
-            k_cw: &c[5],
-            k_cm: &c[6],
-            t12: &c[7],
-            tav90n: &c[8],
-        }
+        Coefficients::from_columns(c)
     }
     fn tables(&self) -> Tables<'_> {
         Tables {

@@ -258,17 +258,7 @@ mod tests {
     fn tables(s: &Synthetic) -> Tables<'_> {
         let c = &s.cols;
         Tables {
-            prospect: Coefficients {
-                nr: &c[0],
-                k_cab: &c[1],
-                k_car: &c[2],
-                k_anth: &c[3],
-                k_brown: &c[4],
-                k_cw: &c[5],
-                k_cm: &c[6],
-                t12: &c[7],
-                tav90n: &c[8],
-            },
+            prospect: Coefficients::from_columns(c),
             soil_dry: &s.soil[0],
             soil_wet: &s.soil[1],
             es: &s.soil[0],

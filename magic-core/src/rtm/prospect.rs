@@ -88,6 +88,22 @@ pub struct Coefficients<'a> {
 }
 
 impl<'a> Coefficients<'a> {
+    /// The nine columns in the file's order: `nr, k_cab, k_car, k_anth, k_brown, k_cw, k_cm, t12,
+    /// tav90n`.
+    pub fn from_columns<C: AsRef<[f64]>>(c: &'a [C; 9]) -> Self {
+        Coefficients {
+            nr: c[0].as_ref(),
+            k_cab: c[1].as_ref(),
+            k_car: c[2].as_ref(),
+            k_anth: c[3].as_ref(),
+            k_brown: c[4].as_ref(),
+            k_cw: c[5].as_ref(),
+            k_cm: c[6].as_ref(),
+            t12: c[7].as_ref(),
+            tav90n: c[8].as_ref(),
+        }
+    }
+
     /// Number of wavelengths (length of the `nr` column).
     pub fn len(&self) -> usize {
         self.nr.len()

@@ -31,7 +31,7 @@ pub struct RtmTables {
     /// Wavelengths (nm).
     pub wl: Vec<f64>,
     /// PROSPECT-D columns (see `PROSPECT_COLS`).
-    pub prospect: Vec<Vec<f64>>,
+    pub prospect: [Vec<f64>; 9],
     /// Dry soil.
     pub soil_dry: Vec<f64>,
     /// Wet soil.
@@ -84,10 +84,8 @@ impl RtmTables {
     pub fn read(dir: &Path) -> Result<RtmTables> {
         let p = Table::read(&dir.join("prospect_d_coefficients.csv"), b',')?;
         let wl = column(&p, "wl")?;
-        let prospect = PROSPECT_COLS
-            .iter()
-            .map(|c| column(&p, c))
-            .collect::<Result<Vec<_>>>()?;
+        let [nr, cab, car, anth, brown, cw, cm, t12, t90] = PROSPECT_COLS.map(|c| column(&p, c));
+        let prospect = [nr?, cab?, car?, anth?, brown?, cw?, cm?, t12?, t90?];
         let soil = Table::read(&dir.join("soil_spectra.csv"), b',')?;
         same_grid(&soil, &wl)?;
         let sun = Table::read(&dir.join("solar_spectra.csv"), b',')?;
@@ -135,17 +133,7 @@ impl RtmTables {
     pub fn tables(&self) -> Tables<'_> {
         let c = &self.prospect;
         Tables {
-            prospect: Coefficients {
-                nr: &c[0],
-                k_cab: &c[1],
-                k_car: &c[2],
-                k_anth: &c[3],
-                k_brown: &c[4],
-                k_cw: &c[5],
-                k_cm: &c[6],
-                t12: &c[7],
-                tav90n: &c[8],
-            },
+            prospect: Coefficients::from_columns(c),
             soil_dry: &self.soil_dry,
             soil_wet: &self.soil_wet,
             es: &self.es,
