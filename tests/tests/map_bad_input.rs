@@ -75,6 +75,7 @@ fn options(input: &Path, out: &str) -> MapOptions {
         offset: OFFSET,
         scl: None,
         residual: true,
+        sd: true,
         date: None,
         window: None,
         bands: None,

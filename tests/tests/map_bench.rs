@@ -8,8 +8,8 @@
 //!
 //! * the encoder alone on the first `MAGIC_MAP_BENCH_ROWS` rows (default 1024; all rows of a
 //!   1 024² image) at full width;
-//! * with `--residual` (INFORM, C, residual, standard deviations) on the first
-//!   `MAGIC_MAP_BENCH_RESIDUAL_ROWS` rows (default 32) at full width;
+//! * with `--residual` (INFORM, C, residual and flags), then with `--sd` (also the standard
+//!   deviations) on the first `MAGIC_MAP_BENCH_RESIDUAL_ROWS` rows (default 32) at full width;
 //!
 //! and prints pixels per second (inversion only, and end to end), peak resident memory and the
 //! time a full 10 980² tile would take at that rate.
@@ -90,7 +90,7 @@ struct Run {
     rss_mib: f64,
 }
 
-fn run(model: &Path, image: &Path, out: &Path, window: [u32; 4], residual: bool) -> Run {
+fn run(model: &Path, image: &Path, out: &Path, window: [u32; 4], flag: Option<&str>) -> Run {
     let mut c = Command::new("/usr/bin/time");
     c.arg("-v")
         .arg(magic_bin())
@@ -104,9 +104,7 @@ fn run(model: &Path, image: &Path, out: &Path, window: [u32; 4], residual: bool)
         "{},{},{},{}",
         window[0], window[1], window[2], window[3]
     ));
-    if residual {
-        c.arg("--residual");
-    }
+    c.args(flag);
     let o = c.output().expect("/usr/bin/time (Debian package `time`)");
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "magic map failed: {err}");
@@ -159,12 +157,16 @@ fn bench_map() {
     for n in sizes {
         let img = bench_image(&dir, n, &scene);
         let out = dir.join(format!("bench_{n}_map.tif"));
-        for (residual, r) in [(false, rows.min(n)), (true, res_rows.min(n))] {
-            let m = run(&model, &img, &out, [0, 0, n, r], residual);
+        for (flag, r) in [
+            (None, rows.min(n)),
+            (Some("--residual"), res_rows.min(n)),
+            (Some("--sd"), res_rows.min(n)),
+        ] {
+            let m = run(&model, &img, &out, [0, 0, n, r], flag);
             let e2e = m.pixels / m.wall_s.max(1e-9);
             println!(
                 "| {n}² | {} | {n} × {r} | {:.0} | {:.0} | {:.0} | {:.1} min |",
-                if residual { "--residual" } else { "encoder" },
+                flag.unwrap_or("encoder"),
                 m.compute_px_s,
                 e2e,
                 m.rss_mib,
@@ -181,7 +183,7 @@ fn bench_map() {
 #[test]
 #[ignore = "benchmark; run with --ignored"]
 fn bench_pixel_parts() {
-    use magic_core::uncertainty::{standard_deviations, SdWorkspace};
+    use magic_core::uncertainty::{standard_deviations, Precision, SdWorkspace};
     use magic_core::{invert_at, Model, Workspace};
     use magic_train::raster::pixel::{pixel, PixelConfig, Scratch, N_OUT};
     use std::time::Instant;
@@ -197,6 +199,7 @@ fn bench_pixel_parts() {
     let mut s = Scratch::default();
     let enc = PixelConfig {
         residual: false,
+        sd: false,
         t_day: f64::NAN,
         sd_factors: vec![1.0; 9],
     };
@@ -212,15 +215,30 @@ fn bench_pixel_parts() {
         .map(|o| invert_at::<f64>(&model, o, f64::NAN, &mut ws).unwrap())
         .collect();
     let t_inv = t.elapsed().as_secs_f64() / n * 1e6;
-    let mut sw = SdWorkspace::default();
-    let t = Instant::now();
-    for (o, inv) in spectra.iter().zip(&invs) {
-        let _ = standard_deviations(&model, o, inv, f64::NAN, &mut sw);
+    let mut t_sd = [0.0; 2];
+    let mut sds = [vec![], vec![]];
+    for (k, precision) in [Precision::F64, Precision::F32].into_iter().enumerate() {
+        let mut sw = SdWorkspace::with_precision(precision);
+        let t = Instant::now();
+        for (o, inv) in spectra.iter().zip(&invs) {
+            sds[k].push(standard_deviations(&model, o, inv, f64::NAN, &mut sw).ok());
+        }
+        t_sd[k] = t.elapsed().as_secs_f64() / n * 1e6;
     }
-    let t_sd = t.elapsed().as_secs_f64() / n * 1e6;
+    // How far the f32 Jacobian moves the standard deviations (relative).
+    let mut worst = 0.0f64;
+    for (a, b) in sds[0].iter().zip(&sds[1]) {
+        if let (Some(a), Some(b)) = (a, b) {
+            for (x, y) in a.sd[..a.n_params].iter().zip(&b.sd[..b.n_params]) {
+                worst = worst.max((x - y).abs() / x.abs());
+            }
+        }
+    }
     println!(
-        "one thread, µs per spectrum ({} spectra): encoder alone {t_enc:.1}; invert (encoder + INFORM + C + residual) {t_inv:.1}; standard deviations {t_sd:.1}; --residual pixel {:.1}",
+        "one thread, µs per spectrum ({} spectra): encoder alone {t_enc:.1}; invert (encoder + INFORM + C + residual) {t_inv:.1}; standard deviations with INFORM's Jacobian in f64 {:.1}, in f32 {:.1} (largest relative change of a standard deviation {worst:.1e}); --residual pixel {t_inv:.1}, --sd pixel {:.1}",
         spectra.len(),
-        t_inv + t_sd
+        t_sd[0],
+        t_sd[1],
+        t_inv + t_sd[1]
     );
 }

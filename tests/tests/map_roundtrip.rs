@@ -64,6 +64,7 @@ fn options(input: &Path, output: &Path, residual: bool) -> MapOptions {
         offset: OFFSET,
         scl: None,
         residual,
+        sd: residual,
         date: None,
         window: None,
         bands: None,
@@ -99,7 +100,7 @@ fn same_bits(a: &[Vec<f32>], b: &[Vec<f32>], what: &str) {
     }
 }
 
-/// `magic map --residual --preview` on the fixture image: the map's path (the preview must be
+/// `magic map --sd --preview` (the residual and the standard deviations) on the fixture image: the map's path (the preview must be
 /// written; `MAGIC_MAP_PNG` keeps it).
 fn map_through_the_cli(f: &Fixture) -> PathBuf {
     let out = f.dir.join("map.tif");
@@ -115,7 +116,7 @@ fn map_through_the_cli(f: &Fixture) -> PathBuf {
         out.to_str().unwrap(),
         "--offset",
         "-1000",
-        "--residual",
+        "--sd",
         "--preview",
         png.to_str().unwrap(),
     ]);

@@ -14,7 +14,7 @@ use super::inform::{
 use super::prospect::{leaf_optics, Coefficients, Leaf, LeafOptics};
 use super::sail::{CampbellBins, Lidf, LITAB_DEG};
 use super::sensor::Resampling;
-use crate::real::{Dual, Lanes, Real};
+use crate::real::{Dual, DualScalar, Lanes, Real};
 use crate::Error;
 
 /// Number of model inputs.
@@ -438,7 +438,7 @@ impl<'a> Inform<'a> {
         fixed: &Fixed,
         geometry: Geometry,
     ) -> Result<([f64; N_BANDS], [[f64; N_LEARNED]; N_BANDS]), Error> {
-        let lj = LearnedJacobian::new(z, fixed, |x| self.scene(x, geometry))?;
+        let lj = LearnedJacobian::<f64>::new(z, fixed, |x| self.scene(x, geometry))?;
         let mut out = [Dual::<N_LEARNED>::constant(0.0); N_BANDS];
         self.sensor.integrate_lanes(
             |i0| lj.wavelengths(&self.rows::<Dual<N_LEARNED>, JacobianLanes>(i0)),
@@ -454,18 +454,20 @@ impl<'a> Inform<'a> {
     }
 }
 
-/// Four wavelengths' forest reflectance with its 7 derivatives ([`Dual`] on lanes).
-pub(crate) type JacobianLanes = <Dual<N_LEARNED> as Real>::Lanes;
+/// Lanes of wavelengths' forest reflectance with its 7 derivatives ([`Dual`] on lanes of the
+/// scalar `T`: four `f64` or eight `f32` with AVX).
+pub(crate) type JacobianLanes<T = f64> = <Dual<N_LEARNED, T> as Real>::Lanes;
 
 /// A dual in 4 variables on lanes of wavelengths.
-type Lanes4 = <Dual<4> as Real>::Lanes;
+type Lanes4<T> = <Dual<4, T> as Real>::Lanes;
 
 /// Plain values on the lanes of [`Lanes4`].
-type PlainLanes = <Lanes4 as Real>::Plain;
+type PlainLanes<T> = <Lanes4<T> as Real>::Plain;
 
 /// The exact derivatives of the forest reflectance with respect to the learned variables
-/// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, for lanes of wavelengths (four at a time), with the
-/// chain rule split so that each part carries few derivatives:
+/// `z = [N, cab, cw, cm, LAI, LAIu, fc]`, for lanes of wavelengths, computed in the scalar `T`
+/// (`f64`, or `f32` where a Jacobian to single precision is enough), with the chain rule split
+/// so that each part carries few derivatives:
 ///
 /// * PROSPECT-D on [`Dual<4>`] in (N, cab, cw, cm) gives the leaf reflectance ρ and
 ///   transmittance τ with their derivatives;
@@ -474,21 +476,21 @@ type PlainLanes = <Lanes4 as Real>::Plain;
 /// * the cover fc moves only the four crown fractions F (through crown diameter and height), and
 ///   R is linear in them ([`crown_fraction_terms`]): `∂R/∂fc = Σ ∂F_i/∂fc·B_i`, with `∂F/∂fc`
 ///   computed once per spectrum.
-pub(crate) struct LearnedJacobian {
+pub(crate) struct LearnedJacobian<T: DualScalar = f64> {
     /// The canopy scene: LAI and LAIu in derivative slots 2 and 3 (0 and 1 are ρ and τ).
-    canopy: Scene<Lanes4>,
+    canopy: Scene<Lanes4<T>>,
     /// The leaf with N, cab, cw, cm in slots 0 to 3.
-    leaf: Leaf<Lanes4>,
+    leaf: Leaf<Lanes4<T>>,
     /// `∂F/∂fc` of the crown fractions `[fcd, fcs, fod, fos]`.
     dfractions_dfc: [f64; 4],
 }
 
-impl LearnedJacobian {
+impl<T: DualScalar> LearnedJacobian<T> {
     /// The per-spectrum part at `z`, with the scene built (and the inputs validated) by `scene`.
     pub(crate) fn new(
         z: &[f64; N_LEARNED],
         fixed: &Fixed,
-        scene: impl FnOnce(&[Dual<4>; N_INPUTS]) -> Result<Scene<Dual<4>>, Error>,
+        scene: impl FnOnce(&[Dual<4, T>; N_INPUTS]) -> Result<Scene<Dual<4, T>>, Error>,
     ) -> Result<Self, Error> {
         if let Some(i) = z.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
@@ -501,29 +503,31 @@ impl LearnedJacobian {
                 what: "fc (must be > 0)",
             });
         }
-        let z4: [Dual<4>; N_LEARNED] = core::array::from_fn(|i| match i {
-            4 => Dual::var(z[4], 2),
-            5 => Dual::var(z[5], 3),
-            _ => Dual::constant(z[i]),
+        let var = |v: f64, slot: usize| Dual::<4, T>::seed(T::c(v), slot);
+        let z4: [Dual<4, T>; N_LEARNED] = core::array::from_fn(|i| match i {
+            4 => var(z[4], 2),
+            5 => var(z[5], 3),
+            _ => Dual::c(z[i]),
         });
         let canopy = scene(&inputs_from_learned(&z4, fixed))?;
-        // The crown fractions as functions of fc, at the angles the scene's crown geometry used.
+        // The crown fractions as functions of fc, at the angles the scene's crown geometry used
+        // (always in f64: once per spectrum).
         let sd = Dual::<1>::constant(fixed.sd);
         let (cd, h) = crown_from_cover(Dual::var(z[6], 0), sd);
-        let [tts, tto, psi] = canopy.inform_angles.map(|a| Dual::constant(a.v));
+        let [tts, tto, psi] = canopy.inform_angles.map(|a| Dual::constant(a.v.value()));
         let cg = crown_geometry(cd, sd, h, tts, tto, psi);
         let leaf = Leaf {
-            n: Dual::<4>::var(z[0], 0),
-            cab: Dual::var(z[1], 1),
-            car: Dual::constant(fixed.car),
-            anth: Dual::constant(fixed.anth),
-            cbrown: Dual::constant(fixed.cbrown),
-            cw: Dual::var(z[2], 2),
-            cm: Dual::var(z[3], 3),
+            n: var(z[0], 0),
+            cab: var(z[1], 1),
+            car: Dual::c(fixed.car),
+            anth: Dual::c(fixed.anth),
+            cbrown: Dual::c(fixed.cbrown),
+            cw: var(z[2], 2),
+            cm: var(z[3], 3),
         };
         Ok(LearnedJacobian {
             canopy: canopy.lanes(),
-            leaf: leaf.map(<Lanes4 as Lanes<Dual<4>>>::splat),
+            leaf: leaf.map(<Lanes4<T> as Lanes<Dual<4, T>>>::splat),
             dfractions_dfc: [cg.fcd.d[0], cg.fcs.d[0], cg.fod.d[0], cg.fos.d[0]],
         })
     }
@@ -531,7 +535,7 @@ impl LearnedJacobian {
     /// The forest reflectance at the wavelengths of `rows` (one per lane) with its derivatives
     /// with respect to `z`.
     #[inline]
-    pub(crate) fn wavelengths(&self, rows: &SpectralRow<PlainLanes>) -> JacobianLanes {
+    pub(crate) fn wavelengths(&self, rows: &SpectralRow<PlainLanes<T>>) -> JacobianLanes<T> {
         let lo = leaf_optics(&rows.coef, &self.leaf);
         let seeded = LeafOptics {
             refl: Dual::seed(lo.refl.v, 0),
@@ -539,7 +543,7 @@ impl LearnedJacobian {
         };
         let t = self.canopy.wavelength_with_leaf(rows, seeded);
         let r = t.r_forest;
-        let mut d = [PlainLanes::c(0.0); N_LEARNED];
+        let mut d = [PlainLanes::<T>::c(0.0); N_LEARNED];
         for (k, dk) in d.iter_mut().take(4).enumerate() {
             *dk = r.d[0] * lo.refl.d[k] + r.d[1] * lo.trans.d[k];
         }
@@ -547,7 +551,7 @@ impl LearnedJacobian {
         d[5] = r.d[3];
         let basis = crown_fraction_terms(t.r_understory.v, t.r_crown_inf.v, t.t_s.v, t.t_o.v);
         for (db, b) in self.dfractions_dfc.iter().zip(basis) {
-            d[6] += b * PlainLanes::c(*db);
+            d[6] += b * PlainLanes::<T>::c(*db);
         }
         Dual { v: r.v, d }
     }

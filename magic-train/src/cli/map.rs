@@ -27,10 +27,14 @@ pub struct MapCmd {
     /// water, saturated and no-data pixels are masked.
     #[arg(long)]
     scl: Option<PathBuf>,
-    /// Run INFORM and the correction for every pixel: residual, flags and standard
-    /// deviations (hundreds of times the cost of the encoder alone).
+    /// Run INFORM and the correction for every pixel: the residual and every flag of `magic
+    /// invert` (about 30 times the cost of the encoder alone).
     #[arg(long)]
     residual: bool,
+    /// Also a standard deviation per variable, from INFORM's exact Jacobian at the solution
+    /// (implies --residual; about 3 times the cost of --residual alone).
+    #[arg(long)]
+    sd: bool,
     /// Acquisition date YYYY-MM-DD (needed by models with the illumination effect).
     #[arg(long)]
     date: Option<String>,
@@ -61,6 +65,7 @@ pub fn run(a: &MapCmd) -> Result<()> {
         offset: a.offset,
         scl: a.scl.clone(),
         residual: a.residual,
+        sd: a.sd,
         date: a.date.clone(),
         window: a.window.as_deref().map(map::parse_window).transpose()?,
         bands: a.bands.clone(),
@@ -71,7 +76,7 @@ pub fn run(a: &MapCmd) -> Result<()> {
         window_rows: map::WINDOW_ROWS,
     };
     let s = map::run(&o)?;
-    let sd = if a.residual {
+    let sd = if a.sd {
         format!(", {} without sd", s.sd_failed)
     } else {
         String::new()

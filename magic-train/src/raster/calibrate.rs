@@ -136,7 +136,12 @@ pub fn normalised_errors(
     spectra
         .par_iter()
         .map_init(
-            || (Workspace::default(), SdWorkspace::default()),
+            || {
+                (
+                    Workspace::default(),
+                    SdWorkspace::with_precision(super::pixel::SD_PRECISION),
+                )
+            },
             |(ws, sw), s| {
                 let inv = invert_at::<f64>(model, &s.obs, t_day, ws).ok()?;
                 let u = standard_deviations(model, &s.obs, &inv, t_day, sw).ok()?;

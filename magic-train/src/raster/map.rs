@@ -42,8 +42,10 @@ pub struct MapOptions {
     pub offset: f64,
     /// Scene classification raster.
     pub scl: Option<PathBuf>,
-    /// Run INFORM and C: residual, flags and standard deviations.
+    /// Run INFORM and C: the residual and every flag of `magic invert`.
     pub residual: bool,
+    /// Also the standard deviations (INFORM's Jacobian; implies `residual`).
+    pub sd: bool,
     /// Acquisition date `YYYY-MM-DD`.
     pub date: Option<String>,
     /// Window `x0, y0, width, height` of the image to map.
@@ -60,6 +62,13 @@ pub struct MapOptions {
     pub progress: bool,
     /// Rows per window (memory grows with it; [`WINDOW_ROWS`] by default).
     pub window_rows: u32,
+}
+
+impl MapOptions {
+    /// Whether INFORM and C run for every pixel (`--residual` or `--sd`).
+    pub fn physics(&self) -> bool {
+        self.residual || self.sd
+    }
 }
 
 /// What a map run did.
@@ -179,7 +188,7 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
         Some(d) => parse_date(d)?,
         None => f64::NAN,
     };
-    if o.residual && model.needs_time() && t_day.is_nan() {
+    if o.physics() && model.needs_time() && t_day.is_nan() {
         bail!(
             "{}: the model's forward model depends on the date (illumination): pass --date YYYY-MM-DD",
             o.model.display()
@@ -220,7 +229,8 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
     summary.big = writer.is_big();
 
     let cfg = PixelConfig {
-        residual: o.residual,
+        residual: o.physics(),
+        sd: o.sd,
         t_day,
         sd_factors: sd_factors.clone(),
     };
@@ -257,7 +267,7 @@ pub fn run(o: &MapOptions) -> Result<MapSummary> {
         )
     })?;
     summary.pixels = w as u64 * h as u64;
-    summary.sd_factors = if o.residual { sd_factors } else { vec![] };
+    summary.sd_factors = if o.sd { sd_factors } else { vec![] };
     if let Some(png) = &o.preview {
         super::preview::render(&o.output, &o.preview_band, png)?;
     }
@@ -305,7 +315,7 @@ fn window_georef(input: &Input, x0: u32, y0: u32, warnings: &mut Vec<String>) ->
 /// The calibration factors of the standard deviations (1 when they are not computed or
 /// `--raw-sd` asks for the raw ones); the factors found are reported on stderr.
 fn sd_factors(o: &MapOptions, model: &Model<'_>, t_day: f64) -> Result<Vec<f64>> {
-    if !o.residual || o.raw_sd {
+    if !o.sd || o.raw_sd {
         return Ok(vec![1.0; N_VARIABLES]);
     }
     let f = calibrate::calibrate(model, t_day)?;
@@ -338,10 +348,20 @@ fn notes(o: &MapOptions, sd_factors: &[f64]) -> Vec<(Option<usize>, String, Stri
         (
             None,
             "MAGIC_RESIDUAL".into(),
-            if o.residual {
+            if o.physics() {
                 "computed"
             } else {
-                "not computed (encoder only): residual_rms and *_sd are NaN"
+                "not computed (encoder only): residual_rms is NaN"
+            }
+            .into(),
+        ),
+        (
+            None,
+            "MAGIC_SD".into(),
+            if o.sd {
+                "computed"
+            } else {
+                "not computed (no --sd): *_sd are NaN"
             }
             .into(),
         ),
@@ -349,7 +369,7 @@ fn notes(o: &MapOptions, sd_factors: &[f64]) -> Vec<(Option<usize>, String, Stri
     if let Some(d) = &o.date {
         notes.push((None, "ACQUISITION_DATE".into(), d.clone()));
     }
-    if o.residual {
+    if o.sd {
         for (k, f) in sd_factors.iter().enumerate() {
             notes.push((
                 Some(N_VARIABLES + 2 + k),
@@ -398,7 +418,7 @@ fn invert_window(
         match oc {
             Outcome::NoData => summary.no_data += 1,
             Outcome::Failed => summary.failed += 1,
-            Outcome::Inverted { sd: false } if cfg.residual => summary.sd_failed += 1,
+            Outcome::Inverted { sd: false } if cfg.sd => summary.sd_failed += 1,
             Outcome::Inverted { .. } => {}
         }
     }

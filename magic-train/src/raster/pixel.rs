@@ -1,19 +1,19 @@
 //! One pixel of a map: the columns of `magic invert` and the standard deviations.
 //!
 //! With the residual (`--residual`) a pixel is exactly `magic invert`'s row: [`invert_at`] (the
-//! encoder, INFORM, the correction C, the residual and the flags), then the standard deviations
-//! of [`magic_core::uncertainty`], scaled by the calibration factors. Without it only the encoder
-//! runs (2.5 µs against about 900 µs for a pixel with the residual
-//! and the standard deviations, one thread, on this branch's INFORM): the variables and the flags `AT_BOUND` and `MISSING`; the
-//! residual and the standard deviations are NaN. A pixel with missing bands then gets one
-//! encoder pass with the missing bands at their training mean, where `invert` refines them with
-//! three more passes through INFORM.
+//! encoder, INFORM, the correction C, the residual and the flags); `--sd` adds the standard
+//! deviations of [`magic_core::uncertainty`] (INFORM's Jacobian in [`SD_PRECISION`]), scaled by
+//! the calibration factors. Without either only the encoder runs: the variables and the flags
+//! `AT_BOUND` and `MISSING`; the residual and the standard deviations are NaN. A pixel with
+//! missing bands then gets one encoder pass with the missing bands at their training mean, where
+//! `invert` refines them with three more passes through INFORM. Costs per pixel on one thread
+//! (`map_bench`): encoder 1.3 µs, `--residual` 42 µs, `--sd` 127 µs.
 
 use crate::data::records::RTM_RESULT_NAMES;
 use magic_core::invert::{model_encoder, Flags, Workspace};
 use magic_core::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
 use magic_core::rtm::inform::crown_from_cover;
-use magic_core::uncertainty::{standard_deviations, SdWorkspace};
+use magic_core::uncertainty::{standard_deviations, Precision, SdWorkspace};
 use magic_core::{invert_at, Error};
 
 /// Names of the map's bands for an RTM model of variant B or C: the variables, `residual_rms`,
@@ -46,18 +46,34 @@ pub enum Outcome {
     },
 }
 
+/// The precision of INFORM's Jacobian for a map's standard deviations (and their calibration):
+/// `f32`, half the time of `f64`, standard deviations within 1e-4 of `f64`'s (relative;
+/// measured 6.9e-5 on the test split by `map_bench`'s `bench_pixel_parts`).
+pub const SD_PRECISION: Precision = Precision::F32;
+
 /// Per-thread working memory.
-#[derive(Default)]
 pub struct Scratch {
     ws: Workspace,
     sw: SdWorkspace,
 }
 
+impl Default for Scratch {
+    /// INFORM's Jacobian in [`SD_PRECISION`].
+    fn default() -> Self {
+        Scratch {
+            ws: Workspace::default(),
+            sw: SdWorkspace::with_precision(SD_PRECISION),
+        }
+    }
+}
+
 /// How pixels are computed.
 #[derive(Clone, Debug)]
 pub struct PixelConfig {
-    /// Run INFORM and C: residual, flags, standard deviations.
+    /// Run INFORM and C: residual and flags.
     pub residual: bool,
+    /// Also the standard deviations (needs `residual`).
+    pub sd: bool,
     /// Acquisition day (days since 1970-01-01; NaN when unknown).
     pub t_day: f64,
     /// Calibration factor per variable for the standard deviations (1 = raw).
@@ -87,6 +103,9 @@ pub fn pixel(
         }
         out[N_VARIABLES] = inv.residual_rms as f32;
         out[N_VARIABLES + 1] = inv.flags.0 as f32;
+        if !cfg.sd {
+            return Outcome::Inverted { sd: false };
+        }
         match standard_deviations(model, obs, &inv, cfg.t_day, &mut s.sw) {
             Ok(u) => {
                 let u = u.scaled(&cfg.sd_factors);
