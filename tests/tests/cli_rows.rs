@@ -172,6 +172,113 @@ fn invert_gives_one_row_per_input_row_with_located_errors() {
     }
 }
 
+/// `magic invert --sd`: the same rows, with `<variable>_sd` columns appended that equal the
+/// library's standard deviations; error rows stay error rows; variant A and `magic qemu` refuse
+/// with a message.
+#[test]
+fn invert_with_standard_deviations() {
+    use magic_core::uncertainty::{standard_deviations, SdWorkspace};
+    use magic_core::{invert_at, Model, Workspace};
+    let tmp = TempDir::new("cli-rows-sd");
+    let model = tmp.join("b.magic");
+    let bytes = random_mogi_model(Variant::B, 1).encode().unwrap();
+    std::fs::write(&model, &bytes).unwrap();
+    let m = Model::decode(&bytes).unwrap();
+    let (header, rows) = observation_rows();
+    let input = tmp.join("obs.csv");
+    write_rows(&input, &header, &rows, "\n");
+    let (plain, with_sd) = (tmp.join("plain.csv"), tmp.join("sd.csv"));
+    for (out, sd) in [(&plain, false), (&with_sd, true)] {
+        let mut c = Command::new(magic_bin());
+        c.args(["invert", "--model"])
+            .arg(&model)
+            .arg("--input")
+            .arg(&input);
+        c.arg("--output").arg(out);
+        if sd {
+            c.arg("--sd");
+        }
+        let o = c.output().unwrap();
+        assert!(!o.status.success(), "bad rows make the command fail");
+    }
+    let plain = std::fs::read_to_string(&plain).unwrap();
+    let text = std::fs::read_to_string(&with_sd).unwrap();
+    let got: Vec<&str> = text.lines().collect();
+    assert_eq!(got.len(), rows.len() + 1, "one result row per input row");
+    let sd_names = ["x_km_sd", "y_km_sd", "depth_km_sd", "dv_1e6m3_sd"];
+    assert_eq!(
+        got[0],
+        format!("{},{}", plain.lines().next().unwrap(), sd_names.join(","))
+    );
+    let (mut ws, mut sw) = (Workspace::default(), SdWorkspace::default());
+    let mut checked = 0;
+    for (r, (res, base)) in rows.iter().zip(got[1..].iter().zip(plain.lines().skip(1))) {
+        if r.bad_field != 0 {
+            assert_eq!(*res, base, "an error row stays the same error row");
+            continue;
+        }
+        assert!(res.starts_with(base), "{res} does not extend {base}");
+        let sd: Vec<f64> = res[base.len() + 1..]
+            .split(',')
+            .map(|x| x.parse().unwrap())
+            .collect();
+        assert_eq!(sd.len(), 4, "{res}");
+        // The library on the same observations (the CSV's values, NaN where empty).
+        let obs: Vec<f32> = r
+            .text
+            .split(',')
+            .skip(1)
+            .map(|x| x.parse().unwrap_or(f32::NAN))
+            .collect();
+        let inv = invert_at::<f64>(&m, &obs, f64::NAN, &mut ws).unwrap();
+        let u = standard_deviations(&m, &obs, &inv, f64::NAN, &mut sw).unwrap();
+        for (k, v) in sd.iter().enumerate() {
+            assert!(*v > 0.0 && v.is_finite(), "{res}");
+            assert!(
+                (v - u.sd[k]).abs() <= 1e-6 * u.sd[k],
+                "{}: CSV {v} vs library {}",
+                sd_names[k],
+                u.sd[k]
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked >= 4, "only {checked} good rows");
+
+    let a = tmp.join("a.magic");
+    std::fs::write(&a, random_mogi_model(Variant::A, 1).encode().unwrap()).unwrap();
+    let o = Command::new(magic_bin())
+        .args(["invert", "--sd", "--model"])
+        .arg(&a)
+        .arg("--input")
+        .arg(&input)
+        .arg("--output")
+        .arg(tmp.join("a.csv"))
+        .output()
+        .unwrap();
+    let err_a = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err_a.contains("a.magic") && err_a.contains("variant A"),
+        "{err_a}"
+    );
+    let o = Command::new(magic_bin())
+        .args(["qemu", "--sd", "--model"])
+        .arg(&model)
+        .arg("--input")
+        .arg(&input)
+        .arg("--output")
+        .arg(tmp.join("q.csv"))
+        .output()
+        .unwrap();
+    let err_q = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err_q.contains("does not compute standard deviations"),
+        "{err_q}"
+    );
+}
+
 #[test]
 fn forward_gives_one_row_per_input_row_with_located_errors() {
     let tmp = TempDir::new("cli-rows-fwd");

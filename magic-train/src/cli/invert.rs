@@ -23,6 +23,10 @@ pub struct RowsArgs {
     /// The input holds standardised values (the data files as they are).
     #[arg(long)]
     standardized: bool,
+    /// Append each variable's standard deviation (`<name>_sd`) from the exact Jacobian at the
+    /// solution (`magic invert` only; variants B and C).
+    #[arg(long)]
+    sd: bool,
 }
 
 fn report_row_errors(rows: &[ObsRow]) {
@@ -38,9 +42,15 @@ pub fn invert(a: &RowsArgs) -> Result<()> {
     let bytes = read_model(&a.model)?;
     let m = decode(&a.model, &bytes)?;
     let rows = records::read_obs(&a.input, &m, a.standardized)?;
-    let lines = records::invert_rows(&m, &rows);
+    let (lines, extra) = if a.sd {
+        let lines = records::invert_rows_sd(&m, &rows)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", a.model.display()))?;
+        (lines, records::sd_columns(&m))
+    } else {
+        (records::invert_rows(&m, &rows), vec![])
+    };
     report_row_errors(&rows);
-    records::write_results(&a.output, &m, &rows, &lines)?;
+    records::write_results_with(&a.output, &m, &rows, &lines, &extra)?;
     let bad = lines.iter().filter(|l| l.starts_with("error,")).count();
     eprintln!(
         "inverted {} rows ({} errors) -> {}",
@@ -59,6 +69,13 @@ pub fn invert(a: &RowsArgs) -> Result<()> {
 
 /// Runs `magic qemu`.
 pub fn qemu(a: &RowsArgs) -> Result<()> {
+    if a.sd {
+        bail!(
+            "magic qemu --sd: the firmware does not compute standard deviations (its 48 KiB flash \
+             budget has no room for the Jacobian and the Cholesky solve); run `magic invert --sd` \
+             on the host"
+        );
+    }
     let bytes = read_model(&a.model)?;
     let m = decode(&a.model, &bytes)?;
     let rows = records::read_obs(&a.input, &m, a.standardized)?;

@@ -135,6 +135,59 @@ pub fn result_columns(model: &Model<'_>) -> Vec<String> {
     names
 }
 
+/// The standard-deviation columns `magic invert --sd` appends: `<variable>_sd` for each of the
+/// model's variables (the source's, the effects' latents, the RTM's derived ones).
+pub fn sd_columns(model: &Model<'_>) -> Vec<String> {
+    let names = result_columns(model);
+    names[..names.len() - 3]
+        .iter()
+        .map(|n| format!("{n}_sd"))
+        .collect()
+}
+
+/// Inverts rows on the host like [`invert_rows`] and appends to each result line the standard
+/// deviations of its variables ([`magic_core::uncertainty::standard_deviations`]: the Laplace
+/// approximation at the solution with the exact Jacobian, raw — not calibrated), `NaN` where
+/// they cannot be computed (e.g. fewer observed channels than variables plus one). Error rows
+/// stay error rows. Fails for a model without a forward model (variant A).
+pub fn invert_rows_sd(model: &Model<'_>, rows: &[ObsRow]) -> Result<Vec<String>> {
+    use magic_core::uncertainty::{standard_deviations, SdWorkspace};
+    if model.variant == magic_core::Variant::A {
+        return Err(anyhow!(
+            "standard deviations need a forward model: this is a variant A model (use B or C)"
+        ));
+    }
+    let n_sd = sd_columns(model).len();
+    let (mut ws, mut sw) = (Workspace::default(), SdWorkspace::default());
+    Ok(rows
+        .iter()
+        .map(|row| {
+            let mut s = String::new();
+            let inv = match &row.obs {
+                Ok(obs) => invert_at::<f64>(model, obs, row.day(), &mut ws).map(|i| (obs, i)),
+                Err(msg) => {
+                    let _ = write!(s, "error,{}", msg.replace(',', ";"));
+                    return s;
+                }
+            };
+            match inv {
+                Ok((obs, inv)) => {
+                    let _ = write_result(&mut s, &inv);
+                    let u = standard_deviations(model, obs, &inv, row.day(), &mut sw).ok();
+                    for k in 0..n_sd {
+                        let sd = u.as_ref().map_or(f64::NAN, |u| u.sd[k]);
+                        let _ = write!(s, ",{}", sd as f32);
+                    }
+                }
+                Err(e) => {
+                    let _ = write_error(&mut s, &LineError::Invert(e));
+                }
+            }
+            s
+        })
+        .collect())
+}
+
 /// Result columns of an RTM inversion: the 7 learned variables, then the derived crown diameter
 /// and tree height.
 pub const RTM_RESULT_NAMES: [&str; 9] = ["N", "cab", "cw", "cm", "LAI", "LAIu", "fc", "cd", "h"];
@@ -206,6 +259,17 @@ pub fn write_results(
     rows: &[ObsRow],
     lines: &[String],
 ) -> Result<()> {
+    write_results_with(path, model, rows, lines, &[])
+}
+
+/// [`write_results`] with `extra` columns after the model's (e.g. [`sd_columns`]).
+pub fn write_results_with(
+    path: &Path,
+    model: &Model<'_>,
+    rows: &[ObsRow],
+    lines: &[String],
+    extra: &[String],
+) -> Result<()> {
     if rows.len() != lines.len() {
         return Err(anyhow!(
             "{} result lines for {} input rows",
@@ -215,6 +279,10 @@ pub fn write_results(
     }
     let with_date = rows.iter().any(|r| r.date.is_some());
     let mut text = result_header(model, with_date);
+    for c in extra {
+        text.push(',');
+        text.push_str(c);
+    }
     text.push('\n');
     for (row, line) in rows.iter().zip(lines) {
         if with_date {
