@@ -10,6 +10,7 @@ use crate::errors;
 use crate::host;
 use crate::parallel::{install, FirstError, OnError, BLOCK};
 use magic_core::model_file::{Problem, MAX_OBS};
+use magic_core::uncertainty::{standard_deviations, SdWorkspace};
 use magic_core::{invert_at, Model as CoreModel, Variant, Workspace};
 use numpy::{PyArrayDyn, PyArrayMethods};
 use pyo3::prelude::*;
@@ -79,18 +80,21 @@ struct Batch {
     used: Vec<u32>,
 }
 
-/// Inverts `n` rows read by `row(i, buf)` with day numbers `days` (NaN: unknown).
+/// Inverts `n` rows read by `row(i, buf)` with day numbers `days` (NaN: unknown). Each row's
+/// floats are its `n_floats` variables and residual, then, with `n_sd > 0`, the standard
+/// deviations of its first `n_sd` variables (NaN where they cannot be computed).
 fn invert_batch(
     model: &CoreModel<'_>,
     n: usize,
-    n_floats: usize,
+    (n_floats, n_sd): (usize, usize),
     row: impl Fn(usize, &mut [f32]) + Sync,
     days: Option<&[f64]>,
     on_error: OnError,
 ) -> Result<Batch, (usize, magic_core::Error)> {
+    let width = n_floats + n_sd;
     let n_obs = model.n_obs();
     let mut b = Batch {
-        floats: vec![0.0; n * n_floats],
+        floats: vec![0.0; n * width],
         flags: vec![0; n],
         used: vec![0; n],
     };
@@ -99,47 +103,58 @@ fn invert_batch(
     }
     let first = FirstError::default();
     b.floats
-        .par_chunks_mut(BLOCK * n_floats)
+        .par_chunks_mut(BLOCK * width)
         .zip(b.flags.par_chunks_mut(BLOCK))
         .zip(b.used.par_chunks_mut(BLOCK))
         .enumerate()
-        .for_each_init(Workspace::default, |ws, (k, ((fl, fg), us))| {
-            let mut obs = [0f32; MAX_OBS];
-            let obs = &mut obs[..n_obs.min(MAX_OBS)];
-            for (j, ((y, f), u)) in fl
-                .chunks_mut(n_floats)
-                .zip(fg.iter_mut())
-                .zip(us.iter_mut())
-                .enumerate()
-            {
-                let i = k * BLOCK + j;
-                if on_error == OnError::Raise && first.before(i) {
-                    return;
-                }
-                row(i, obs);
-                let day = days.map_or(f64::NAN, |d| d[i]);
-                match invert_at::<f64>(model, obs, day, ws) {
-                    Ok(inv) => {
-                        let np = inv.n_params.min(n_floats - 1);
-                        y[..np].copy_from_slice(&inv.params[..np]);
-                        y[np..].fill(f64::NAN);
-                        y[n_floats - 1] = inv.residual_rms;
-                        *f = inv.flags.0;
-                        *u = inv.used;
+        .for_each_init(
+            || (Workspace::default(), SdWorkspace::default()),
+            |(ws, sw), (k, ((fl, fg), us))| {
+                let mut obs = [0f32; MAX_OBS];
+                let obs = &mut obs[..n_obs.min(MAX_OBS)];
+                for (j, ((y, f), u)) in fl
+                    .chunks_mut(width)
+                    .zip(fg.iter_mut())
+                    .zip(us.iter_mut())
+                    .enumerate()
+                {
+                    let i = k * BLOCK + j;
+                    if on_error == OnError::Raise && first.before(i) {
+                        return;
                     }
-                    Err(e) => match on_error {
-                        OnError::Raise => {
-                            first.record(i, e);
-                            return;
+                    row(i, obs);
+                    let day = days.map_or(f64::NAN, |d| d[i]);
+                    match invert_at::<f64>(model, obs, day, ws) {
+                        Ok(inv) => {
+                            let (y, s) = y.split_at_mut(n_floats);
+                            let np = inv.n_params.min(n_floats - 1);
+                            y[..np].copy_from_slice(&inv.params[..np]);
+                            y[np..].fill(f64::NAN);
+                            y[n_floats - 1] = inv.residual_rms;
+                            *f = inv.flags.0;
+                            *u = inv.used;
+                            s.fill(f64::NAN);
+                            if n_sd > 0 {
+                                if let Ok(sd) = standard_deviations(model, obs, &inv, day, sw) {
+                                    let m = sd.n_params.min(n_sd);
+                                    s[..m].copy_from_slice(&sd.sd[..m]);
+                                }
+                            }
                         }
-                        OnError::Nan => {
-                            y.fill(f64::NAN);
-                            (*f, *u) = (0, 0);
-                        }
-                    },
+                        Err(e) => match on_error {
+                            OnError::Raise => {
+                                first.record(i, e);
+                                return;
+                            }
+                            OnError::Nan => {
+                                y.fill(f64::NAN);
+                                (*f, *u) = (0, 0);
+                            }
+                        },
+                    }
                 }
-            }
-        });
+            },
+        );
     match first.take() {
         Some(e) => Err(e),
         None => Ok(b),
@@ -241,6 +256,10 @@ impl Model {
     ///     `stations_used`.
     /// threads
     ///     Threads to use (default: all cores, or `RAYON_NUM_THREADS`).
+    /// sd
+    ///     Also return `<variable>_sd` per variable, as `magic invert --sd` writes them: the
+    ///     Laplace approximation at the solution with the exact Jacobian (raw, not calibrated);
+    ///     NaN where a row has too few observed channels. Variants B and C only.
     ///
     /// Returns
     /// -------
@@ -250,7 +269,7 @@ impl Model {
     ///     LAIu, fc, cd, h` for a forest), `residual_rms` (float64, physical units), `flags`
     ///     (uint8: 1 a variable at its bound, 2 missing channels, 4 residual above the model's
     ///     threshold) and `stations_used` (uint32 bit mask of the stations or bands observed).
-    #[pyo3(signature = (obs, dates=None, *, errors="raise", threads=None))]
+    #[pyo3(signature = (obs, dates=None, *, errors="raise", threads=None, sd=false))]
     fn invert<'py>(
         &self,
         py: Python<'py>,
@@ -258,8 +277,15 @@ impl Model {
         dates: Option<&Bound<'py, PyAny>>,
         errors: &str,
         threads: Option<usize>,
+        sd: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let on_error = OnError::parse(errors)?;
+        if sd && self.variant == Variant::A {
+            return Err(errors::value(
+                "sd",
+                "standard deviations need a forward model: this is a variant A model (use B or C)",
+            ));
+        }
         let arr = float_array("obs", obs)?;
         let rows = arr.rows("obs", self.inputs.len(), &self.inputs)?;
         let n = rows.len();
@@ -285,6 +311,8 @@ impl Model {
             _ => None,
         };
         let n_floats = self.outputs.len() - 2;
+        let n_sd = if sd { n_floats - 1 } else { 0 };
+        let width = n_floats + n_sd;
         let bytes = self.bytes.clone();
         let result = py.detach(|| {
             install(threads, || {
@@ -292,7 +320,7 @@ impl Model {
                 invert_batch(
                     &model,
                     n,
-                    n_floats,
+                    (n_floats, n_sd),
                     |i, buf| rows.row_f32(i, buf),
                     days.as_deref(),
                     on_error,
@@ -308,7 +336,7 @@ impl Model {
         })?;
         let out = PyDict::new(py);
         for (k, name) in self.outputs[..n_floats].iter().enumerate() {
-            let col: Vec<f64> = b.floats.iter().skip(k).step_by(n_floats).copied().collect();
+            let col: Vec<f64> = b.floats.iter().skip(k).step_by(width).copied().collect();
             out.set_item(name, shaped(py, &rows.shape, &[], col)?)?;
         }
         out.set_item(
@@ -319,6 +347,16 @@ impl Model {
             &self.outputs[n_floats + 1],
             shaped(py, &rows.shape, &[], b.used)?,
         )?;
+        for (k, name) in self.outputs[..n_sd].iter().enumerate() {
+            let col: Vec<f64> = b
+                .floats
+                .iter()
+                .skip(n_floats + k)
+                .step_by(width)
+                .copied()
+                .collect();
+            out.set_item(format!("{name}_sd"), shaped(py, &rows.shape, &[], col)?)?;
+        }
         Ok(out)
     }
 

@@ -141,9 +141,9 @@ def s2_spectra(data: Path, n_sites: int, dates: tuple) -> tuple:
 
 
 def cli_invert(magic_bin: Path, model: Path, names: list, obs: np.ndarray, tmp: Path,
-               dates=None) -> list:
-    """`magic invert` on the rows of `obs` (columns `names`, values written exactly): the result
-    rows as lists of strings (a failed row is `["error", message]`)."""
+               dates=None, extra=()) -> list:
+    """`magic invert` on the rows of `obs` (columns `names`, values written exactly), with the
+    options `extra`: the result rows as lists of strings (a failed row is `["error", message]`)."""
     inp, out = tmp / "obs.csv", tmp / "result.csv"
     with open(inp, "w", newline="") as f:
         w = csv.writer(f)
@@ -151,7 +151,7 @@ def cli_invert(magic_bin: Path, model: Path, names: list, obs: np.ndarray, tmp: 
         for i, row in enumerate(obs.reshape(-1, obs.shape[-1])):
             vals = ["" if math.isnan(v) else repr(float(v)) for v in row]
             w.writerow(([dates[i]] if dates is not None else []) + vals)
-    r = run([magic_bin, "invert", "--model", model, "--input", inp, "--output", out])
+    r = run([magic_bin, "invert", "--model", model, "--input", inp, "--output", out, *extra])
     assert out.is_file(), f"magic invert wrote nothing:\n{r.stderr}"
     with open(out, newline="") as f:
         lines = f.read().splitlines()

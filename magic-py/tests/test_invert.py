@@ -61,6 +61,40 @@ def test_volcano_equals_cli(magic_bin, volcano, synth, tmp_path, dtype):
     assert (res["flags"].reshape(-1)[::7] & 2).all()
 
 
+#: The standard deviations: the CLI prints them as the shortest f32 text (about 7 digits).
+SD_REL_TOL = 1e-6
+
+
+@pytest.mark.parametrize("which", ["volcano", "forest"])
+def test_standard_deviations_equal_cli(magic_bin, volcano, forest, synth, data, tmp_path, which):
+    path = volcano if which == "volcano" else forest
+    model = magic.Model.load(path)
+    if which == "volcano":
+        _, x, _ = gnss_rows(synth, 80)
+        x[::9, 0:3] = np.nan
+    else:
+        x, _ = s2_spectra(data, 30, S2_DATES)
+    header, rows = cli_invert(magic_bin, path, model.inputs, x, tmp_path, extra=["--sd"])
+    variables = model.outputs[:-3]
+    sds = [f"{v}_sd" for v in variables]
+    assert header == model.outputs + sds
+    res = model.invert(x, sd=True)
+    assert set(res) == set(model.outputs) | set(sds)
+    plain = model.invert(x)
+    compared = 0
+    for i, row in enumerate(rows):
+        if row[0] == "error":
+            assert all(np.isnan(res[c][i]) for c in sds)
+            continue
+        for c in model.outputs:
+            assert res[c][i] == plain[c][i] or (np.isnan(res[c][i]) and np.isnan(plain[c][i]))
+        for c, text in zip(sds, row[len(model.outputs):]):
+            cli = float(text)
+            assert res[c][i] > 0 and abs(res[c][i] - cli) <= SD_REL_TOL * cli, (i, c, cli, res[c][i])
+        compared += 1
+    assert compared >= 60
+
+
 def test_volcano_with_effect_names_its_variables(magic_bin, volcano_cm, synth, tmp_path):
     model = magic.Model.load(volcano_cm)
     assert model.outputs[:7] == ["x_km", "y_km", "depth_km", "dv_1e6m3",

@@ -56,9 +56,11 @@ class Model:
         *,
         errors: _Errors = "raise",
         threads: Optional[int] = None,
+        sd: bool = False,
     ) -> Dict[str, np.ndarray]:
         """Inverts observations `(..., len(inputs))` (float32/float64, NaN missing): one array
-        per column of `outputs`, shaped `obs.shape[:-1]`."""
+        per column of `outputs`, shaped `obs.shape[:-1]`; with `sd=True` also `<variable>_sd`
+        per variable (as `magic invert --sd`)."""
     def __reduce__(self) -> Tuple[Any, Tuple[bytes]]: ...
 
 class Tables:
