@@ -9,7 +9,7 @@ use magic_core::Variant;
 use magic_tests::{magic_bin, random_mogi_model, TempDir};
 use magic_train::gnss::synth;
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 /// What a row of the input is, and the 1-based field where its error is expected (0: none;
 /// `usize::MAX`: one past the end of the line).
@@ -172,6 +172,20 @@ fn invert_gives_one_row_per_input_row_with_located_errors() {
     }
 }
 
+/// `magic <sub> --model … --input … --output …` (with `--sd`).
+fn rows_command(sub: &str, model: &Path, input: &Path, output: &Path, sd: bool) -> Output {
+    let mut c = Command::new(magic_bin());
+    c.args([sub, "--model"])
+        .arg(model)
+        .arg("--input")
+        .arg(input);
+    c.arg("--output").arg(output);
+    if sd {
+        c.arg("--sd");
+    }
+    c.output().unwrap()
+}
+
 /// `magic invert --sd`: the same rows, with `<variable>_sd` columns appended that equal the
 /// library's standard deviations; error rows stay error rows; variant A and `magic qemu` refuse
 /// with a message.
@@ -189,16 +203,7 @@ fn invert_with_standard_deviations() {
     write_rows(&input, &header, &rows, "\n");
     let (plain, with_sd) = (tmp.join("plain.csv"), tmp.join("sd.csv"));
     for (out, sd) in [(&plain, false), (&with_sd, true)] {
-        let mut c = Command::new(magic_bin());
-        c.args(["invert", "--model"])
-            .arg(&model)
-            .arg("--input")
-            .arg(&input);
-        c.arg("--output").arg(out);
-        if sd {
-            c.arg("--sd");
-        }
-        let o = c.output().unwrap();
+        let o = rows_command("invert", &model, &input, out, sd);
         assert!(!o.status.success(), "bad rows make the command fail");
     }
     let plain = std::fs::read_to_string(&plain).unwrap();
@@ -247,30 +252,14 @@ fn invert_with_standard_deviations() {
 
     let a = tmp.join("a.magic");
     std::fs::write(&a, random_mogi_model(Variant::A, 1).encode().unwrap()).unwrap();
-    let o = Command::new(magic_bin())
-        .args(["invert", "--sd", "--model"])
-        .arg(&a)
-        .arg("--input")
-        .arg(&input)
-        .arg("--output")
-        .arg(tmp.join("a.csv"))
-        .output()
-        .unwrap();
+    let o = rows_command("invert", &a, &input, &tmp.join("a.csv"), true);
     let err_a = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert!(
         err_a.contains("a.magic") && err_a.contains("variant A"),
         "{err_a}"
     );
-    let o = Command::new(magic_bin())
-        .args(["qemu", "--sd", "--model"])
-        .arg(&model)
-        .arg("--input")
-        .arg(&input)
-        .arg("--output")
-        .arg(tmp.join("q.csv"))
-        .output()
-        .unwrap();
+    let o = rows_command("qemu", &model, &input, &tmp.join("q.csv"), true);
     let err_q = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success());
     assert!(

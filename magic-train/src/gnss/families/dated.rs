@@ -212,7 +212,10 @@ mod tests {
                 seen[(*d - 15_000.0) as usize] += 1;
             }
         }
-        assert!(seen.iter().all(|&s| s == 1), "every row held out exactly once");
+        assert!(
+            seen.iter().all(|&s| s == 1),
+            "every row held out exactly once"
+        );
     }
 
     /// A step in the record's first tenth is scored (every fold's fit sees both of its sides):
@@ -226,6 +229,9 @@ mod tests {
         let held: f64 = 0.9 * 0.1 * offset.iter().map(|o| o * o).sum::<f64>();
         let share = held / (held + nc as f64 / 3.0);
         let s = cv_score(&b, nc, &|b| fit_block(b, nc, ns, &[]));
-        assert!(s > 0.8 * share, "cv score {s:.4} vs the step's share {share:.4}");
+        assert!(
+            s > 0.8 * share,
+            "cv score {s:.4} vs the step's share {share:.4}"
+        );
     }
 }
