@@ -78,6 +78,9 @@ pub struct TrainConfig {
     pub smooth_mean: bool,
     /// Show a progress bar.
     pub progress: bool,
+    /// Training runs from different initialisations (the seed, then seeds derived from it); the
+    /// run with the lowest validation loss is kept. 1 is the paper's single run.
+    pub restarts: usize,
 }
 
 impl TrainConfig {
@@ -94,6 +97,7 @@ impl TrainConfig {
             lambda: 0.01,
             smooth_mean: true,
             progress: true,
+            restarts: 1,
         }
     }
 
@@ -115,6 +119,14 @@ impl TrainConfig {
             ..self
         }
     }
+
+    /// This recipe with `restarts` runs (at least 1), the best on validation kept.
+    pub fn with_restarts(self, restarts: usize) -> Self {
+        TrainConfig {
+            restarts: restarts.max(1),
+            ..self
+        }
+    }
 }
 
 /// What a training run measured.
@@ -128,8 +140,12 @@ pub struct TrainLog {
     pub best_valid: f64,
     /// Mean training loss and validation loss per epoch.
     pub history: Vec<(f64, f64)>,
-    /// Wall-clock seconds in all.
+    /// Wall-clock seconds in all (of the run kept).
     pub seconds: f64,
+    /// Which of the [`TrainConfig::restarts`] runs was kept (0: the one from the seed itself).
+    pub restart: usize,
+    /// Best validation loss of every run.
+    pub restart_valid: Vec<f64>,
 }
 
 impl TrainLog {
@@ -446,6 +462,41 @@ pub const D_SAMPLES: [usize; 2] = [11_520, 2_880];
 /// training split, early stopping on its validation split) and returns the f32 model file with
 /// its log and its residual threshold set on the validation split.
 pub fn train_model<P: Problem + ?Sized>(
+    problem: &P,
+    kind: ModelKind,
+    effects: &[OwnedEffect],
+    cfg: &TrainConfig,
+    seed: u64,
+) -> Result<(OwnedModel, TrainLog)> {
+    let mut best: Option<(OwnedModel, TrainLog)> = None;
+    let mut valid = Vec::new();
+    for r in 0..cfg.restarts.max(1) {
+        let (model, log) = train_once(problem, kind, effects, cfg, restart_seed(seed, r))?;
+        valid.push(log.best_valid);
+        if best
+            .as_ref()
+            .is_none_or(|(_, b)| log.best_valid < b.best_valid)
+        {
+            best = Some((model, TrainLog { restart: r, ..log }));
+        }
+    }
+    let (model, log) = best.ok_or_else(|| anyhow::anyhow!("no training run"))?;
+    Ok((
+        model,
+        TrainLog {
+            restart_valid: valid,
+            ..log
+        },
+    ))
+}
+
+/// The seed of restart `r` (restart 0: `seed` itself).
+pub fn restart_seed(seed: u64, r: usize) -> u64 {
+    seed ^ (r as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// One training run from `seed`.
+fn train_once<P: Problem + ?Sized>(
     problem: &P,
     kind: ModelKind,
     effects: &[OwnedEffect],

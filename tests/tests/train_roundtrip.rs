@@ -81,3 +81,34 @@ fn seeds_make_runs_repeatable() {
         .unwrap();
     assert_eq!(a, b);
 }
+
+/// Restarts keep the run with the lowest validation loss: the first run is the single run of
+/// the same seed, and the model kept is that run's or a better one on validation.
+#[test]
+fn restarts_keep_the_best_run_on_validation() {
+    let p = synth::generate(synth::Scenario::Clean, 4).problem;
+    let cfg = TrainConfig {
+        epochs: 3,
+        progress: false,
+        ..TrainConfig::gnss()
+    };
+    let (single, one) = train_model(&p, ModelKind::C, &[], &cfg, 5).unwrap();
+    let (kept, log) = train_model(&p, ModelKind::C, &[], &cfg.clone().with_restarts(3), 5).unwrap();
+    assert_eq!(log.restart_valid.len(), 3);
+    assert_eq!(
+        log.restart_valid[0], one.best_valid,
+        "run 0 is the single run"
+    );
+    let min = log
+        .restart_valid
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(log.best_valid, min);
+    assert_eq!(log.restart_valid[log.restart], min);
+    if log.restart == 0 {
+        assert_eq!(kept.encode().unwrap(), single.encode().unwrap());
+    } else {
+        assert!(log.best_valid < one.best_valid);
+    }
+}

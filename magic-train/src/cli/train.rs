@@ -34,6 +34,10 @@ pub struct Common {
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Training runs from different initialisations; the one with the lowest validation MSE
+    /// is kept (1: the paper's single run).
+    #[arg(long, default_value_t = 1)]
+    pub restarts: usize,
     /// Output model file (f32).
     #[arg(long)]
     pub out: PathBuf,
@@ -84,6 +88,19 @@ fn finish(
     let (model, log): (_, TrainLog) = train_model(problem, c.kind, effects, cfg, c.seed)?;
     let bytes = model.encode()?;
     write_file(&c.out, &bytes)?;
+    if log.restart_valid.len() > 1 {
+        let v: Vec<String> = log
+            .restart_valid
+            .iter()
+            .map(|v| format!("{v:.4}"))
+            .collect();
+        eprintln!(
+            "{} runs, best validation MSE per run: {}; kept run {}",
+            v.len(),
+            v.join(", "),
+            log.restart
+        );
+    }
     eprintln!(
         "trained {} {:?} on {} rows: {} epochs ({:.2} s/epoch, {:.1} s), best valid {} {:.4} at epoch {} -> {} ({} bytes)",
         problem.name(),
@@ -114,7 +131,9 @@ pub fn run(cmd: &TrainCmd) -> Result<()> {
             let cfg = TrainConfig {
                 lambda: *lambda,
                 smooth_mean: *smooth == SmoothArg::Mean,
-                ..p.recipe().with(common.epochs, false)
+                ..p.recipe()
+                    .with(common.epochs, false)
+                    .with_restarts(common.restarts)
             };
             let effects: Vec<_> = effects.iter().map(|e| p.latent_effect(*e)).collect();
             finish(&p, common, &effects, &cfg)
@@ -129,7 +148,10 @@ pub fn run(cmd: &TrainCmd) -> Result<()> {
             if *limit > 0 {
                 p.data.train = p.data.train.head(*limit);
             }
-            let cfg = p.recipe().with(common.epochs, false);
+            let cfg = p
+                .recipe()
+                .with(common.epochs, false)
+                .with_restarts(common.restarts);
             let effects: Vec<_> = effects.iter().map(|e| p.effect(*e)).collect();
             finish(&p, common, &effects, &cfg)
         }
