@@ -577,6 +577,18 @@ fn undeclared_illumination_is_found_in_synthetic_spectra() {
         "{}",
         a0.table()
     );
+    // How sure: the pattern's weight with its bootstrap sd (fitting spectra drawn with
+    // replacement).
+    let w = top
+        .uncertainty
+        .iter()
+        .find(|p| p.name == "weight")
+        .expect("the illumination weight carries a bootstrap sd");
+    eprintln!("illumination weight {:.3} ± {:.3}", w.value, w.sd);
+    assert!(
+        w.sd > 0.0 && w.sd.is_finite() && w.sd < w.value.abs(),
+        "{w:?}"
+    );
 
     let (b1, _) = train_model(&setup, ModelKind::B, &[setup.illumination()], &cfg, 3).unwrap();
     let bytes1 = b1.encode().unwrap();

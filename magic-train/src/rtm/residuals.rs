@@ -28,7 +28,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 /// One spectrum's projected residual and patterns.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Spectrum {
     /// Residual (standardised), projected off F's Jacobian.
     pub r: Vec<f64>,
@@ -93,6 +93,32 @@ impl SpectraResiduals {
     /// Number of bands.
     pub fn nb(&self) -> usize {
         self.ctx.bands.len()
+    }
+
+    /// A bootstrap draw for the families' uncertainties: as many fitting spectra drawn with
+    /// replacement (with their dates, species and signs), no held-out spectra (a draw is refitted,
+    /// not scored).
+    pub fn resample_fit(&self, rng: &mut impl rand::Rng) -> SpectraResiduals {
+        let n = self.ctx.fit.len();
+        let idx: Vec<usize> = (0..n).map(|_| rng.random_range(0..n.max(1))).collect();
+        let c = &self.ctx;
+        SpectraResiduals {
+            fit_dates: idx.iter().map(|&i| self.fit_dates[i]).collect(),
+            held_dates: vec![],
+            fit_species: idx.iter().map(|&i| self.fit_species[i]).collect(),
+            fit_signs: idx.iter().map(|&i| self.fit_signs[i]).collect(),
+            ctx: Arc::new(Context {
+                fit: idx.iter().map(|&i| c.fit[i].clone()).collect(),
+                held: vec![],
+                splits: c.splits,
+                dates: c.dates.clone(),
+                species: c.species.clone(),
+                bands: c.bands.clone(),
+                scale: c.scale.clone(),
+                declared: c.declared.clone(),
+                sun: c.sun.clone(),
+            }),
+        }
     }
 
     /// Whether the model declares an effect of `family`.

@@ -69,6 +69,26 @@ impl Family<SpectraResiduals> for BandOffset {
             .collect();
         json!({ "offset_reflectance": refl, "declared": res.declares(self.name()) })
     }
+    /// The projected fit's offset per band (reflectance), named `offset_<band>`.
+    fn key_params(&self, res: &SpectraResiduals, fit: &OffsetFit) -> Vec<(&'static str, f64)> {
+        let Some(off) = &fit.offset else {
+            return vec![];
+        };
+        off.iter()
+            .zip(&res.ctx.bands)
+            .zip(&res.ctx.scale)
+            .filter_map(|((v, band), sc)| offset_key(band).map(|k| (k, v * sc)))
+            .collect()
+    }
+    /// Bootstrap over the fitting spectra ([`SpectraResiduals::resample_fit`]).
+    fn resample(
+        &self,
+        res: &SpectraResiduals,
+        _: &OffsetFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<SpectraResiduals>> {
+        Some(Ok(res.resample_fit(rng)))
+    }
     fn declare(&self, res: &SpectraResiduals, _: &OffsetFit) -> Option<OwnedEffect> {
         let fit = &res.ctx.fit;
         (!res.declares(self.name()) && !fit.is_empty()).then(|| OwnedEffect::BandOffset {
@@ -79,5 +99,40 @@ impl Family<SpectraResiduals> for BandOffset {
                 })
                 .collect(),
         })
+    }
+}
+
+/// The key of the offset of the band of column `band` (`B05` or `B05_RE1`: `offset_B05`), for
+/// the Sentinel-2 bands.
+fn offset_key(band: &str) -> Option<&'static str> {
+    let band = band.split('_').next().unwrap_or(band);
+    const KEYS: [&str; 13] = [
+        "offset_B01",
+        "offset_B02",
+        "offset_B03",
+        "offset_B04",
+        "offset_B05",
+        "offset_B06",
+        "offset_B07",
+        "offset_B08",
+        "offset_B8A",
+        "offset_B09",
+        "offset_B10",
+        "offset_B11",
+        "offset_B12",
+    ];
+    magic_core::rtm::S2_BANDS
+        .iter()
+        .position(|b| *b == band)
+        .map(|i| KEYS[i])
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn offset_keys_name_the_band() {
+        assert_eq!(super::offset_key("B05_RE1"), Some("offset_B05"));
+        assert_eq!(super::offset_key("B8A"), Some("offset_B8A"));
+        assert_eq!(super::offset_key("NDVI"), None);
     }
 }

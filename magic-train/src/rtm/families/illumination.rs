@@ -107,6 +107,19 @@ impl Family<SpectraResiduals> for Illumination {
             "declared": res.declares(self.name()),
         })
     }
+    /// The pattern's weight (1: the sun's effect as F computes it).
+    fn key_params(&self, _: &SpectraResiduals, fit: &IlluminationFit) -> Vec<(&'static str, f64)> {
+        vec![("weight", fit.weight)]
+    }
+    /// Bootstrap over the fitting spectra ([`SpectraResiduals::resample_fit`]).
+    fn resample(
+        &self,
+        res: &SpectraResiduals,
+        _: &IlluminationFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<SpectraResiduals>> {
+        Some(Ok(res.resample_fit(rng)))
+    }
     fn declare(&self, res: &SpectraResiduals, _: &IlluminationFit) -> Option<OwnedEffect> {
         (!res.declares(self.name())).then(|| res.ctx.sun.clone())
     }
