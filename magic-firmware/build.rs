@@ -32,6 +32,8 @@ fn main() {
     let uart = env::var_os("CARGO_FEATURE_UART").is_some();
     let layout = if env::var_os("CARGO_FEATURE_RTM").is_some() {
         "memory-rtm.x"
+    } else if env::var_os("CARGO_FEATURE_SD").is_some() && !uart {
+        "memory-sd.x"
     } else if uart {
         "memory-uart.x"
     } else {
@@ -39,6 +41,7 @@ fn main() {
     };
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=memory-rtm.x");
+    println!("cargo:rerun-if-changed=memory-sd.x");
     println!("cargo:rerun-if-changed=memory-uart.x");
     if let Err(e) = fs::copy(manifest.join(layout), out.join("memory.x")) {
         fail(&format!(

@@ -73,6 +73,13 @@ pub struct Workspace {
     nn: Scratch,
 }
 
+impl Workspace {
+    /// Zeroed working memory (`const`, as [`Scratch::new`]).
+    pub const fn new() -> Self {
+        Workspace { nn: Scratch::new() }
+    }
+}
+
 /// Inverts one observation vector (physical units; NaN marks a missing channel).
 ///
 /// ```no_run

@@ -272,13 +272,20 @@ pub struct Scratch {
     acc: [i32; MAX_WIDTH],
 }
 
-impl Default for Scratch {
-    fn default() -> Self {
+impl Scratch {
+    /// Zeroed working memory (`const`: a static can hold it without building it on the stack).
+    pub const fn new() -> Self {
         Scratch {
             f: [[0.0; MAX_WIDTH]; 2],
             q: [[0; packed_words(MAX_WIDTH)]; 2],
             acc: [0; MAX_WIDTH],
         }
+    }
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch::new()
     }
 }
 

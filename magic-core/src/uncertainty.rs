@@ -28,8 +28,8 @@
 //! standard deviations by factors measured on synthetic spectra with known variables
 //! ([`Uncertainty::scaled`]).
 
-use crate::invert::{forward, model_decoder, Inversion, Workspace};
-use crate::model_file::{Model, Problem, Variant, MAX_OBS, MAX_PARAMS};
+use crate::invert::{forward_for, model_decoder, Inversion, Workspace};
+use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
 use crate::rtm::inform::crown_from_cover;
 use crate::rtm::N_LEARNED;
 use crate::{Dual, Error};
@@ -72,23 +72,21 @@ pub struct SdWorkspace {
 }
 
 impl SdWorkspace {
-    /// A workspace whose INFORM Jacobians are computed in `precision`.
-    pub fn with_precision(precision: Precision) -> Self {
+    /// A workspace whose INFORM Jacobians are computed in `precision` (`const`: a static can
+    /// hold it without building it on the stack, as the firmware does).
+    pub const fn with_precision(precision: Precision) -> Self {
         SdWorkspace {
             precision,
-            ..SdWorkspace::default()
+            jac: [[0.0; MAX_PARAMS]; MAX_OBS],
+            y: [0.0; MAX_OBS],
+            ws: Workspace::new(),
         }
     }
 }
 
 impl Default for SdWorkspace {
     fn default() -> Self {
-        SdWorkspace {
-            precision: Precision::F64,
-            jac: [[0.0; MAX_PARAMS]; MAX_OBS],
-            y: [0.0; MAX_OBS],
-            ws: Workspace::default(),
-        }
+        SdWorkspace::with_precision(Precision::F64)
     }
 }
 
@@ -150,6 +148,19 @@ pub fn forward_jacobian_in(
     y: &mut [f64],
     jac: &mut [[f64; MAX_PARAMS]],
 ) -> Result<(), Error> {
+    forward_jacobian_for::<AnyProblem>(model, params, t_day, precision, y, jac)
+}
+
+/// [`forward_jacobian_in`] in a build that links only the forward models of `P` (an RTM model
+/// is [`Error::WrongProblem`] for [`crate::model_file::MogiOnly`]).
+fn forward_jacobian_for<P: Problems>(
+    model: &Model<'_>,
+    params: &[f64],
+    t_day: f64,
+    precision: Precision,
+    y: &mut [f64],
+    jac: &mut [[f64; MAX_PARAMS]],
+) -> Result<(), Error> {
     let (n_obs, n_params) = (model.n_obs(), model.n_params());
     if model.variant == Variant::A {
         return Err(Error::InvalidModel("variant A has no forward model"));
@@ -164,6 +175,7 @@ pub fn forward_jacobian_in(
     }
     let (y, jac) = (&mut y[..n_obs], &mut jac[..n_obs]);
     match &model.problem {
+        Problem::Rtm { .. } if !P::RTM => return Err(Error::WrongProblem),
         Problem::Rtm {
             fixed, geometry, ..
         } => {
@@ -197,7 +209,7 @@ pub fn forward_jacobian_in(
                         _ => Dual::constant(v),
                     };
                 }
-                forward(model, &p[..n_params], t_day, &mut out[..n_obs])?;
+                forward_for::<_, P>(model, &p[..n_params], t_day, &mut out[..n_obs])?;
                 for ((row, yi), o) in jac.iter_mut().zip(y.iter_mut()).zip(&out) {
                     *yi = o.v;
                     for (slot, d) in o.d.iter().enumerate() {
@@ -236,6 +248,18 @@ pub fn standard_deviations(
     t_day: f64,
     sw: &mut SdWorkspace,
 ) -> Result<Uncertainty, Error> {
+    standard_deviations_for::<AnyProblem>(model, obs, inv, t_day, sw)
+}
+
+/// [`standard_deviations`] in a build that links only the forward models of `P` (the
+/// firmware: [`crate::model_file::MogiOnly`]).
+pub fn standard_deviations_for<P: Problems>(
+    model: &Model<'_>,
+    obs: &[f32],
+    inv: &Inversion<f64>,
+    t_day: f64,
+    sw: &mut SdWorkspace,
+) -> Result<Uncertainty, Error> {
     let (n_obs, p) = (model.n_obs(), model.n_params());
     crate::error::check_len("observations", n_obs, obs.len())?;
     if p == 0 || p > MAX_PARAMS || inv.n_params < p || inv.n_obs != n_obs || n_obs > MAX_OBS {
@@ -248,7 +272,9 @@ pub fn standard_deviations(
     if model.bounds.len() < p {
         return Err(Error::InvalidModel("variables without bounds"));
     }
-    forward_jacobian_in(
+    // (Checked above; the clamps let the compiler see it: no index below can panic.)
+    let (p, obs) = (p.min(MAX_PARAMS), &obs[..n_obs.min(obs.len()).min(MAX_OBS)]);
+    forward_jacobian_for::<P>(
         model,
         &inv.params[..p],
         t_day,
@@ -266,7 +292,8 @@ pub fn standard_deviations(
         if x.is_nan() {
             continue;
         }
-        let r = (x as f64 - inv.recon[i]) / scale(model, i)?;
+        let recon = inv.recon.get(i).copied().unwrap_or(f64::NAN);
+        let r = (x as f64 - recon) / scale(model, i)?;
         ss += r * r;
         m += 1;
     }
@@ -287,7 +314,7 @@ pub fn standard_deviations(
 
     // A = JᵀJ/s² + 12·I in variables scaled to their bounds (u = (z − lo)/range).
     let mut range = [0.0f64; MAX_PARAMS];
-    for (r, b) in range.iter_mut().zip(&model.bounds[..p]) {
+    for (r, b) in range.iter_mut().zip(model.bounds.iter().take(p)) {
         *r = (b[1] - b[0]) as f64;
         if !(*r > 0.0 && r.is_finite()) {
             return Err(Error::InvalidModel("variable bounds not increasing"));
@@ -299,7 +326,9 @@ pub fn standard_deviations(
             continue;
         }
         let sc = scale(model, i)?;
-        let row = &sw.jac[i];
+        let Some(row) = sw.jac.get(i) else {
+            continue;
+        };
         for j in 0..p {
             let gj = row[j] * range[j] / sc;
             for k in 0..=j {
@@ -322,10 +351,17 @@ pub fn standard_deviations(
     }
     // Derived RTM variables: crown diameter and height from fc.
     if let (Problem::Rtm { fixed, .. }, true) = (&model.problem, inv.n_params >= p + 2) {
-        let fc = Dual::<1>::var(inv.params[p - 1], 0);
-        let (cd, h) = crown_from_cover(fc, Dual::constant(fixed.sd));
-        out.sd[p] = (cd.d[0] * out.sd[p - 1]).abs();
-        out.sd[p + 1] = (h.d[0] * out.sd[p - 1]).abs();
+        if let (Some(&fc), Some(&fc_sd), true) = (
+            inv.params.get(p.wrapping_sub(1)),
+            out.sd.get(p.wrapping_sub(1)),
+            p + 2 <= MAX_PARAMS,
+        ) {
+            let (cd, h) = crown_from_cover(Dual::<1>::var(fc, 0), Dual::constant(fixed.sd));
+            if let [sd_cd, sd_h] = &mut out.sd[p..p + 2] {
+                *sd_cd = (cd.d[0] * fc_sd).abs();
+                *sd_h = (h.d[0] * fc_sd).abs();
+            }
+        }
     }
     Ok(out)
 }
@@ -343,7 +379,7 @@ fn scale(model: &Model<'_>, i: usize) -> Result<f64, Error> {
 /// Replaces F's Jacobian in `sw.jac` by that of C(F): for each variable k, the directional
 /// derivative of C (standardised in and out) along F's column k, by central differences.
 fn correction_jacobian(model: &Model<'_>, p: usize, sw: &mut SdWorkspace) -> Result<(), Error> {
-    let n = model.n_obs();
+    let (n, p) = (model.n_obs().min(MAX_OBS), p.min(MAX_PARAMS));
     let mut f = [0f32; MAX_OBS];
     for (i, fi) in f.iter_mut().enumerate().take(n) {
         *fi = ((sw.y[i] - model.obs_mean.get(i) as f64) / scale(model, i)?) as f32;
@@ -410,7 +446,7 @@ fn diag_inverse(
             }
             col[i] = s / a[i][i];
         }
-        *o = col[k..p].iter().map(|c| c * c).sum();
+        *o = col.iter().take(p).skip(k).map(|c| c * c).sum();
         if !o.is_finite() {
             return Err(not_pd);
         }

@@ -40,6 +40,10 @@ pub fn run() -> bool {
         out.end_line();
         return false;
     };
+    #[cfg(feature = "sd")]
+    let Some(sd_state) = crate::sd::state() else {
+        return false;
+    };
     let clock = Clock::start(cp.SYST);
     let Some(model) = start_model(&mut out) else {
         return false;
@@ -55,6 +59,8 @@ pub fn run() -> bool {
     let mut parts = [Stat::default(); 3];
     let mut missing = Stat::default();
     let mut parse = Stat::default();
+    #[cfg(feature = "sd")]
+    let mut sd_cost = Stat::default();
     let mut lines = 0u32;
     let mut errors = 0u32;
     while let Some(line) = stdin.next_line() {
@@ -72,6 +78,8 @@ pub fn run() -> bool {
         let t0 = clock.now();
         let parsed = parse_record_bytes(text, with_date, &mut obs[..n_obs]);
         parse.add(clock.since(t0));
+        #[cfg(feature = "sd")]
+        let day = parsed.as_ref().ok().copied().unwrap_or(f64::NAN);
         let mut timing = Timing {
             clock: &clock,
             start: 0,
@@ -95,6 +103,12 @@ pub fn run() -> bool {
                     }
                 }
                 let _ = write_result(&mut out, inv);
+                #[cfg(feature = "sd")]
+                {
+                    let t = clock.now();
+                    crate::sd::write_sds(&mut out, model, &obs[..n_obs], day, inv, sd_state);
+                    sd_cost.add(clock.since(t));
+                }
             }
             Err(e) => {
                 errors += 1;
@@ -123,6 +137,8 @@ pub fn run() -> bool {
     let key = "instructions_per_inversion_with_missing";
     kv(&mut out, key, missing.mean());
     kv(&mut out, "instructions_parse_line", parse.mean());
+    #[cfg(feature = "sd")]
+    kv(&mut out, "instructions_standard_deviations", sd_cost.mean());
     let [enc, mogi, corr] = parts;
     kv(&mut out, "instructions_encoder", enc.mean());
     kv(&mut out, "instructions_mogi", mogi.mean());

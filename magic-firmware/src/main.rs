@@ -78,6 +78,8 @@ mod app;
 mod cost;
 #[cfg(all(target_os = "none", feature = "semihosting"))]
 mod io;
+#[cfg(all(target_os = "none", feature = "semihosting", feature = "sd"))]
+mod sd;
 
 // The deployable build.
 #[cfg(all(target_os = "none", feature = "uart"))]

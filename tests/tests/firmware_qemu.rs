@@ -27,6 +27,9 @@ const TIMEOUT_S: u64 = 120;
 /// fraction of each variable's range: measured 5.4e-8 (plain model), 4.6e-8 and 5.7e-8 (effects
 /// models); 10× the largest.
 const BOARD_MAX_REL_ERROR: f64 = 6e-7;
+/// The board's standard deviations (feature `sd`: f64 in software from its f32 inversion) against
+/// the host's (from its f64 inversion), relative: measured 2.5e-6; 10× that.
+const BOARD_SD_MAX_REL_ERROR: f64 = 2.5e-5;
 
 /// A deterministic pseudo-random stream (xorshift64*), uniform in [-1, 1).
 struct Rng(u64);
@@ -442,6 +445,107 @@ fn check_effects_model(name: &str, effects: Vec<OwnedEffect>, n_params: usize, r
     ] {
         eprintln!("  {k} = {:?}", run.cost(k));
     }
+}
+
+/// The firmware built with the feature `sd` appends each variable's standard deviation to every
+/// result line, as `magic invert --sd` does; a model with a time-dependent effect, so that the
+/// date reaches the Jacobian too.
+#[test]
+fn standard_deviations_run_on_the_firmware() {
+    if !toolchain_ready() {
+        return;
+    }
+    let effects = vec![
+        OwnedEffect::CommonMode,
+        OwnedEffect::Step {
+            station: 5,
+            epoch_day: 14_610.0, // 2010-01-01
+            offset_mm: [3.0, -2.0, 6.0],
+        },
+    ];
+    let bytes = model_bytes_with(effects);
+    let model = Model::decode(&bytes).unwrap();
+    let path = temp_dir().join("sd.magic");
+    std::fs::write(&path, &bytes).unwrap();
+    let elf = build_firmware_with(&path, &["sd"]).expect("building the firmware with `sd`");
+    let mut rng = Rng(0x0DDB_A11C_AFE5_EED5);
+    let st = stations();
+    let mut lines = Vec::new();
+    for i in 0..16 {
+        let day = 13_500 + 193 * i; // across the step
+        let (y, m, d) = magic_core::time::civil_from_days(day);
+        let mut obs = observation(&mut rng, &st);
+        if i % 5 == 0 {
+            obs[..3].fill(f32::NAN); // a station down
+        }
+        let text: Vec<String> = obs
+            .iter()
+            .map(|x| {
+                if x.is_nan() {
+                    String::new()
+                } else {
+                    format!("{x}")
+                }
+            })
+            .collect();
+        lines.push(format!("{y:04}-{m:02}-{d:02},{}", text.join(",")));
+    }
+    lines.push(vec!["1.0"; N_OBS].join(",")); // no date: an error row, no standard deviations
+    let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
+    let run = run_firmware(&elf, &input, TIMEOUT_S).expect("running the firmware");
+    assert!(
+        run.success,
+        "firmware failed: {:?}\n{}",
+        run.results.last(),
+        run.stderr
+    );
+    assert_eq!(
+        run.results.len(),
+        lines.len(),
+        "one output line per input line"
+    );
+    let (mut ws, mut sw) = (
+        magic_core::Workspace::default(),
+        magic_core::uncertainty::SdWorkspace::default(),
+    );
+    let mut worst = 0f64;
+    let n = model.n_params();
+    for (line, got) in lines.iter().zip(&run.results) {
+        let mut obs = vec![0f32; N_OBS];
+        let Ok(day) = magic_core::line::parse_record(line, true, &mut obs) else {
+            assert!(got.starts_with("error,"), "{got}");
+            continue;
+        };
+        let inv = magic_core::invert_at::<f64>(&model, &obs, day, &mut ws).unwrap();
+        let u =
+            magic_core::uncertainty::standard_deviations(&model, &obs, &inv, day, &mut sw).unwrap();
+        let fields: Vec<&str> = got.split(',').collect();
+        assert_eq!(fields.len(), n + 3 + n, "{got}");
+        variables_agree(&model, line, &fields[..n + 3], &inv);
+        for (k, f) in fields[n + 3..].iter().enumerate() {
+            let board: f64 = f.parse().unwrap();
+            let rel = (board - u.sd[k]).abs() / u.sd[k];
+            worst = worst.max(rel);
+            assert!(
+                rel <= BOARD_SD_MAX_REL_ERROR,
+                "sd {k} of {line:?}: board {board}, host {}",
+                u.sd[k]
+            );
+        }
+    }
+    let cost = |k: &str| run.cost(k).unwrap_or_else(|| panic!("no `{k}` figure"));
+    eprintln!(
+        "standard deviations on the board: within {worst:.2e} of the host's; {} instructions each, flash {} bytes, stack {} of {} bytes",
+        cost("instructions_standard_deviations"),
+        cost("flash_bytes"),
+        cost("stack_bytes"),
+        cost("stack_available_bytes"),
+    );
+    assert!(cost("stack_bytes") < cost("stack_available_bytes"));
+    // The standard deviations' code is panic-free too: the same build links with the
+    // panic-never handler.
+    build_firmware_with(&path, &["sd", "panic-never"])
+        .expect("the `sd` firmware must link with the panic-never handler");
 }
 
 #[test]

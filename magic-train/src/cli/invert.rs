@@ -24,7 +24,7 @@ pub struct RowsArgs {
     #[arg(long)]
     standardized: bool,
     /// Append each variable's standard deviation (`<name>_sd`) from the exact Jacobian at the
-    /// solution (`magic invert` only; variants B and C).
+    /// solution (variants B and C; with `magic qemu` on a firmware built with the feature `sd`).
     #[arg(long)]
     sd: bool,
 }
@@ -67,28 +67,43 @@ pub fn invert(a: &RowsArgs) -> Result<()> {
     Ok(())
 }
 
-/// Runs `magic qemu`.
+/// Runs `magic qemu` (with `--sd`: on a firmware that also computes the standard deviations).
 pub fn qemu(a: &RowsArgs) -> Result<()> {
-    if a.sd {
-        bail!(
-            "magic qemu --sd: the firmware does not compute standard deviations (its 48 KiB flash \
-             budget has no room for the Jacobian and the Cholesky solve); run `magic invert --sd` \
-             on the host"
-        );
-    }
     let bytes = read_model(&a.model)?;
     let m = decode(&a.model, &bytes)?;
+    if a.sd && m.variant == magic_core::Variant::A {
+        bail!(
+            "{}: standard deviations need a forward model: this is a variant A model (use B or C)",
+            a.model.display()
+        );
+    }
     let rows = records::read_obs(&a.input, &m, a.standardized)?;
     report_row_errors(&rows);
-    let run = crate::firmware::run_rows(&a.model, &m, &rows)?;
-    records::write_results(&a.output, &m, &rows, &run.results)?;
+    let features: &[&str] = if a.sd { &["sd"] } else { &[] };
+    let run = crate::firmware::run_rows_with(&a.model, &m, &rows, features)?;
+    let extra = if a.sd {
+        records::sd_columns(&m)
+    } else {
+        vec![]
+    };
+    records::write_results_with(&a.output, &m, &rows, &run.results, &extra)?;
     for (k, v) in &run.costs {
         eprintln!("# {k} = {v}");
     }
-    let host = records::invert_rows(&m, &rows);
+    let host = if a.sd {
+        records::invert_rows_sd(&m, &rows)?
+    } else {
+        records::invert_rows(&m, &rows)
+    };
     let (worst, mismatched) = crate::firmware::agreement(&m, &run.results, &host);
+    let sd = if a.sd {
+        let w = crate::firmware::sd_agreement(&run.results, &host, extra.len());
+        format!("; standard deviations within {w:.1e} (relative) of the host's")
+    } else {
+        String::new()
+    };
     eprintln!(
-        "{} rows -> {}; largest difference from the host: {:.1e} of a variable's range; {} rows failed on one side only",
+        "{} rows -> {}; largest difference from the host: {:.1e} of a variable's range{sd}; {} rows failed on one side only",
         rows.len(),
         a.output.display(),
         worst.iter().copied().fold(0.0, f64::max),

@@ -8,4 +8,4 @@ pub mod run;
 pub mod station;
 
 pub use qemu::{build_firmware, run_firmware, FirmwareRun};
-pub use run::{agreement, run_rows, run_test_days};
+pub use run::{agreement, run_rows, run_rows_with, run_test_days, sd_agreement};

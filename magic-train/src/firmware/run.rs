@@ -1,7 +1,7 @@
 //! The firmware leg of `magic demo` and `magic qemu`: build the board image with a model, stream
 //! observation rows through it under QEMU, and compare every result with the host.
 
-use super::qemu::{build_firmware, ensure_toolchain, run_firmware, FirmwareRun};
+use super::qemu::{build_firmware_with, ensure_toolchain, run_firmware, FirmwareRun};
 use crate::data::records::{firmware_lines, ObsRow};
 use anyhow::{bail, Result};
 use magic_core::Model;
@@ -13,8 +13,18 @@ pub const TIMEOUT_S: u64 = 120;
 
 /// Builds the firmware with `model_path` and runs `rows` through it; checks one result per row.
 pub fn run_rows(model_path: &Path, model: &Model<'_>, rows: &[ObsRow]) -> Result<FirmwareRun> {
+    run_rows_with(model_path, model, rows, &[])
+}
+
+/// [`run_rows`] on a firmware built with `extra_features` (`sd`: the standard deviations).
+pub fn run_rows_with(
+    model_path: &Path,
+    model: &Model<'_>,
+    rows: &[ObsRow],
+    extra_features: &[&str],
+) -> Result<FirmwareRun> {
     ensure_toolchain()?;
-    let elf = build_firmware(model_path)?;
+    let elf = build_firmware_with(model_path, extra_features)?;
     let run = run_firmware(&elf, &firmware_lines(rows, model.needs_time()), TIMEOUT_S)?;
     if !run.success {
         bail!(
@@ -60,6 +70,30 @@ pub fn agreement(model: &Model<'_>, fw: &[String], host: &[String]) -> (Vec<f64>
         }
     }
     (worst, mismatched)
+}
+
+/// Largest relative difference between the firmware's and the host's standard deviations (the
+/// `n_sd` last fields of each result line, both sides finite), over the rows both inverted.
+pub fn sd_agreement(fw: &[String], host: &[String], n_sd: usize) -> f64 {
+    let tail = |line: &str| -> Vec<f64> {
+        let v: Vec<&str> = line.split(',').collect();
+        v[v.len().saturating_sub(n_sd)..]
+            .iter()
+            .filter_map(|x| x.parse().ok())
+            .collect()
+    };
+    let mut worst = 0f64;
+    for (a, b) in fw.iter().zip(host) {
+        if a.starts_with("error") || b.starts_with("error") {
+            continue;
+        }
+        for (x, y) in tail(a).iter().zip(&tail(b)) {
+            if x.is_finite() && y.is_finite() {
+                worst = worst.max((x - y).abs() / y.abs().max(1e-12));
+            }
+        }
+    }
+    worst
 }
 
 /// Runs the test days on the firmware, prints the comparison and the board's cost figures, and
