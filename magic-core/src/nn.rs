@@ -284,8 +284,15 @@ impl Scratch {
 }
 
 impl Default for Scratch {
+    // Not `Scratch::new()`: built through the const fn, the firmware's run-time singleton of the
+    // working memory hard-faults at start-up on the board (measured; cause not found), so the
+    // run-time path keeps its own constructor.
     fn default() -> Self {
-        Scratch::new()
+        Scratch {
+            f: [[0.0; MAX_WIDTH]; 2],
+            q: [[0; packed_words(MAX_WIDTH)]; 2],
+            acc: [0; MAX_WIDTH],
+        }
     }
 }
 

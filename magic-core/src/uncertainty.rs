@@ -136,24 +136,13 @@ pub fn forward_jacobian(
     y: &mut [f64],
     jac: &mut [[f64; MAX_PARAMS]],
 ) -> Result<(), Error> {
-    forward_jacobian_in(model, params, t_day, Precision::F64, y, jac)
+    forward_jacobian_for::<AnyProblem>(model, params, t_day, Precision::F64, y, jac)
 }
 
-/// [`forward_jacobian`] with INFORM's Jacobian in the given precision.
-pub fn forward_jacobian_in(
-    model: &Model<'_>,
-    params: &[f64],
-    t_day: f64,
-    precision: Precision,
-    y: &mut [f64],
-    jac: &mut [[f64; MAX_PARAMS]],
-) -> Result<(), Error> {
-    forward_jacobian_for::<AnyProblem>(model, params, t_day, precision, y, jac)
-}
-
-/// [`forward_jacobian_in`] in a build that links only the forward models of `P` (an RTM model
-/// is [`Error::WrongProblem`] for [`crate::model_file::MogiOnly`]).
-fn forward_jacobian_for<P: Problems>(
+/// [`forward_jacobian`] with INFORM's Jacobian in `precision`, in a build that links only the
+/// forward models of `P` (an RTM model is [`Error::WrongProblem`] for
+/// [`crate::model_file::MogiOnly`]).
+pub fn forward_jacobian_for<P: Problems>(
     model: &Model<'_>,
     params: &[f64],
     t_day: f64,

@@ -235,6 +235,25 @@ fn variables_agree(
     worst
 }
 
+/// Runs `lines` through the firmware `elf` and checks that it succeeded with one output line
+/// per input line.
+fn run_lines(elf: &std::path::Path, lines: &[String]) -> magic_train::firmware::FirmwareRun {
+    let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
+    let run = run_firmware(elf, &input, TIMEOUT_S).expect("running the firmware");
+    assert!(
+        run.success,
+        "firmware failed: {:?}\n{}",
+        run.results.last(),
+        run.stderr
+    );
+    assert_eq!(
+        run.results.len(),
+        lines.len(),
+        "one output line per input line"
+    );
+    run
+}
+
 fn temp_dir() -> PathBuf {
     let dir = std::env::temp_dir().join(format!("magic-firmware-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -396,19 +415,7 @@ fn check_effects_model(name: &str, effects: Vec<OwnedEffect>, n_params: usize, r
     }
     lines.push(format!("2010-13-01,{}", vec!["1.0"; N_OBS].join(","))); // bad date
     lines.push(vec!["1.0"; N_OBS].join(",")); // no date
-    let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
-    let run = run_firmware(&elf, &input, TIMEOUT_S).expect("running the firmware");
-    assert!(
-        run.success,
-        "firmware failed: {:?}\n{}",
-        run.results.last(),
-        run.stderr
-    );
-    assert_eq!(
-        run.results.len(),
-        lines.len(),
-        "one output line per input line"
-    );
+    let run = run_lines(&elf, &lines);
 
     let mut ws = magic_core::Workspace::default();
     let mut worst = 0f64;
@@ -491,19 +498,7 @@ fn standard_deviations_run_on_the_firmware() {
         lines.push(format!("{y:04}-{m:02}-{d:02},{}", text.join(",")));
     }
     lines.push(vec!["1.0"; N_OBS].join(",")); // no date: an error row, no standard deviations
-    let input: String = lines.iter().map(|l| format!("{l}\n")).collect();
-    let run = run_firmware(&elf, &input, TIMEOUT_S).expect("running the firmware");
-    assert!(
-        run.success,
-        "firmware failed: {:?}\n{}",
-        run.results.last(),
-        run.stderr
-    );
-    assert_eq!(
-        run.results.len(),
-        lines.len(),
-        "one output line per input line"
-    );
+    let run = run_lines(&elf, &lines);
     let (mut ws, mut sw) = (
         magic_core::Workspace::default(),
         magic_core::uncertainty::SdWorkspace::default(),
