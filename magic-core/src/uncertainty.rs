@@ -128,7 +128,7 @@ impl Uncertainty {
 /// `jac[i][k] = ∂yᵢ/∂params_k` in physical units, for the model's `n_obs` channels.
 ///
 /// RTM models use INFORM's split-chain-rule Jacobian; Mogi models (with their effects) run
-/// [`forward`] on [`Dual`] numbers, four variables per pass.
+/// [`forward`](crate::invert::forward) on [`Dual`] numbers, four variables per pass.
 pub fn forward_jacobian(
     model: &Model<'_>,
     params: &[f64],
