@@ -284,9 +284,10 @@ impl Scratch {
 }
 
 impl Default for Scratch {
-    // Not `Scratch::new()`: built through the const fn, the firmware's run-time singleton of the
-    // working memory hard-faults at start-up on the board (measured; cause not found), so the
-    // run-time path keeps its own constructor.
+    // Not `Scratch::new()`: through the const fn, LLVM builds the firmware's run-time singleton
+    // of the working memory from two stack copies (a 7 KiB frame, `sub sp, #7176`), which
+    // overflows the board's 8 KiB stack at start-up (a hard fault); this constructor is built in
+    // place.
     fn default() -> Self {
         Scratch {
             f: [[0.0; MAX_WIDTH]; 2],
