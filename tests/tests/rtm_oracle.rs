@@ -1,5 +1,5 @@
-//! INFORM / 4SAIL / PROSPECT-D held to the reference outputs in `shared/data/oracle`, the exact
-//! Jacobian held to central differences, and physical invariants checked with proptest.
+//! INFORM / 4SAIL / PROSPECT-D held to the reference outputs in `shared/data/oracle`, and physical
+//! invariants checked with proptest (the exact Jacobian: `rtm_jacobian.rs`).
 //!
 //! Data are found through `MAGIC_DATA` or `../shared/data` next to the workspace; without them the
 //! tests fail, saying what to set.
@@ -7,23 +7,20 @@
 // Index loops over several parallel arrays (bands × variables) read more plainly here.
 #![allow(clippy::needless_range_loop)]
 
+mod rtm_common;
+
 use magic_core::rtm::inform::Geometry;
 use magic_core::rtm::prosail::{self, Prosail, FACTOR_NAMES, N_FACTORS};
-use magic_core::rtm::prospect::Coefficients;
 use magic_core::rtm::sail::{
     extinction, layer, medium, sail, CampbellBins, HotspotRule, Lidf, SunView,
 };
-use magic_core::rtm::{
-    inputs_from_learned, Fixed, Inform, Tables, LEARNED_BOUNDS, N_BANDS, N_INPUTS, N_LEARNED,
-};
+use magic_core::rtm::{inputs_from_learned, Fixed, Inform, Tables, N_BANDS, N_INPUTS, N_LEARNED};
 use magic_core::Error;
-use std::collections::HashMap;
-use std::path::PathBuf;
-use std::sync::OnceLock;
+use rtm_common::{box_point, data, inputs, to_f32, Csv};
 
 // Tolerances: the measured error (printed by `-- --nocapture`) times 10, rounded up, unless
 // stated otherwise. The oracle inputs are fixed, so the measurements are deterministic; the
-// proptest bounds were measured on 2 000 random points (600 for the Jacobian), beyond the cases
+// proptest bounds were measured on 2 000 random points, beyond the cases
 // the tests draw.
 
 /// INFORM f64 against the oracle (reflectance): measured 3.0e-14 (10k) and 5.3e-14 (geometry 2k).
@@ -43,16 +40,6 @@ const INFORM_SCALARS_MAX_ERROR: f64 = 2.5e-15;
 /// Physical 4SAIL (rsot, rdot, rsdt, rddt in bands) against the independent prosail package:
 /// measured 2.2e-14, 4.4e-14, 5.5e-14, 9.1e-14.
 const PROSAIL_MAX_ERROR: f64 = 1e-12;
-/// The dual number's value against the plain f64 forward model: measured 2.2e-16 (one ulp).
-const DUAL_VALUE_MAX_ERROR: f64 = 2.5e-15;
-/// The exact Jacobian against central differences (relative, see `jacobian_error`): measured
-/// 1.2e-7 / 1.7e-7 (reference / physical geometry) at the centre and corners, 2.4e-7 on 600
-/// random points of the box: the central differences' own error.
-const JACOBIAN_MAX_REL_ERROR: f64 = 2.5e-6;
-/// The packed rows' Jacobian in f32 against f64 (bands relative to their value, derivatives
-/// scaled by the variable's range and relative to the column's largest, floored at 1e-4):
-/// measured 1.6e-3 at the centre and the 128 corners, both geometries (the bound is the core's).
-const JACOBIAN_F32_VS_F64_MAX_REL_ERROR: f64 = magic_core::rtm::bands::JACOBIAN_F32_MAX_REL_ERROR;
 /// f32 INFORM against f64 on varied inputs: measured 3.3e-7.
 const F32_VS_F64_MAX_ERROR: f64 = 3.5e-6;
 /// A stand of crown cover fc = 40 against the closed crown layer: measured 0 (exact); a few ulps.
@@ -62,151 +49,6 @@ const CLOSED_CANOPY_MAX_GAP: f64 = 4.0 * f64::EPSILON;
 const SPARSE_STAND_MAX_GAP: f64 = 1e-6;
 /// 4SAIL with sun and view exchanged (rsot; rdot against rsdt; rddt): measured 3.3e-16, 0, 0.
 const RECIPROCITY_MAX_ERROR: f64 = 4e-15;
-
-// ---------------------------------------------------------------------------------------------
-// Data loading (std only)
-
-/// A CSV file: header and rows of raw fields.
-struct Csv {
-    rows: Vec<Vec<String>>,
-    index: HashMap<String, usize>,
-}
-
-impl Csv {
-    fn read(path: PathBuf) -> Csv {
-        let text =
-            std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-        let header: Vec<String> = lines
-            .next()
-            .expect("header")
-            .split(',')
-            .map(|s| s.trim().to_string())
-            .collect();
-        let rows: Vec<Vec<String>> = lines
-            .map(|l| l.split(',').map(|s| s.trim().to_string()).collect())
-            .collect();
-        let index = header
-            .iter()
-            .enumerate()
-            .map(|(i, h)| (h.clone(), i))
-            .collect();
-        Csv { rows, index }
-    }
-    fn col(&self, name: &str) -> usize {
-        *self
-            .index
-            .get(name)
-            .unwrap_or_else(|| panic!("no column {name}"))
-    }
-    fn f(&self, row: usize, name: &str) -> f64 {
-        self.rows[row][self.col(name)].parse().unwrap()
-    }
-    fn column(&self, name: &str) -> Vec<f64> {
-        let c = self.col(name);
-        self.rows.iter().map(|r| r[c].parse().unwrap()).collect()
-    }
-    fn s(&self, row: usize, name: &str) -> &str {
-        &self.rows[row][self.col(name)]
-    }
-}
-
-/// Owned copies of the tables, lent to the model as [`Tables`].
-struct OwnedTables {
-    cols: [Vec<f64>; 9],
-    soil_dry: Vec<f64>,
-    soil_wet: Vec<f64>,
-    es: Vec<f64>,
-    ed: Vec<f64>,
-    beta: Vec<f64>,
-    resampling: Vec<f64>,
-}
-
-impl OwnedTables {
-    fn load(dir: &std::path::Path) -> OwnedTables {
-        let p = Csv::read(dir.join("rtm/prospect_d_coefficients.csv"));
-        let cols = [
-            "nr", "k_cab", "k_car", "k_anth", "k_brown", "k_cw", "k_cm", "t12", "tav90n",
-        ]
-        .map(|c| p.column(c));
-        let soil = Csv::read(dir.join("rtm/soil_spectra.csv"));
-        let sun = Csv::read(dir.join("rtm/solar_spectra.csv"));
-        let lidf = Csv::read(dir.join("rtm/lidf_tables.csv"));
-        let mut beta = Vec::new();
-        for r in 0..lidf.rows.len() {
-            for k in 0..6 {
-                beta.push(lidf.f(r, &format!("beta_{k}")));
-            }
-        }
-        let m = Csv::read(dir.join("rtm/sentinel2_full_resampling_matrix.csv"));
-        let mut resampling = Vec::new();
-        for r in 0..m.rows.len() {
-            for b in magic_core::rtm::S2_BANDS {
-                resampling.push(m.f(r, b));
-            }
-        }
-        OwnedTables {
-            cols,
-            soil_dry: soil.column("Rsoil1_dry"),
-            soil_wet: soil.column("Rsoil2_wet"),
-            es: sun.column("Es_direct"),
-            ed: sun.column("Ed_diffuse"),
-            beta,
-            resampling,
-        }
-    }
-    fn coefficients(&self) -> Coefficients<'_> {
-        let c = &self.cols;
-        Coefficients::from_columns(c)
-    }
-    fn tables(&self) -> Tables<'_> {
-        Tables {
-            prospect: self.coefficients(),
-            soil_dry: &self.soil_dry,
-            soil_wet: &self.soil_wet,
-            es: &self.es,
-            ed: &self.ed,
-            lidf_beta: &self.beta,
-            resampling: &self.resampling,
-        }
-    }
-}
-
-struct Data {
-    dir: PathBuf,
-    tables: OwnedTables,
-}
-
-/// The tables and the oracle outputs (a test failure, saying what to set, without them).
-fn data() -> &'static Data {
-    static DATA: OnceLock<Data> = OnceLock::new();
-    DATA.get_or_init(|| {
-        let dir = magic_tests::data_with(&["rtm/prospect_d_coefficients.csv", "oracle"]);
-        let tables = OwnedTables::load(&dir);
-        Data { dir, tables }
-    })
-}
-
-const INPUT_COLS: [&str; N_INPUTS] = [
-    "N", "cab", "car", "anth", "cbrown", "cw", "cm", "cp", "cbc", "LAI", "typeLIDF", "LIDF",
-    "hspot", "psoil", "tts", "tto", "psi", "LAIu", "cd", "sd", "h",
-];
-
-fn inputs(csv: &Csv, r: usize) -> [f64; N_INPUTS] {
-    let mut x = [0.0; N_INPUTS];
-    for (k, name) in INPUT_COLS.iter().enumerate() {
-        x[k] = csv.f(r, name);
-    }
-    x
-}
-
-fn to_f32(x: &[f64; N_INPUTS]) -> [f32; N_INPUTS] {
-    let mut y = [0.0f32; N_INPUTS];
-    for (a, b) in y.iter_mut().zip(x) {
-        *a = *b as f32;
-    }
-    y
-}
 
 // ---------------------------------------------------------------------------------------------
 // Reference geometry against the INFORM oracles
@@ -454,188 +296,6 @@ fn physical_sail_matches_prosail() {
             FACTOR_NAMES[k],
             err[k]
         );
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Exact Jacobian (Dual<7>) against central differences
-
-/// Relative agreement of an exact derivative with a central difference. Derivatives are scaled by
-/// the variable's range (so each is "band change over the whole range"); the comparison is
-/// relative to the larger of the two, floored at 1e-4 (a derivative that moves a band by less than
-/// 1e-4 reflectance over the whole range is compared in absolute terms).
-fn jacobian_error(model: &Inform<'_>, z: &[f64; N_LEARNED], geometry: Geometry) -> f64 {
-    let fixed = Fixed::default();
-    let (y, jac) = model.jacobian(z, &fixed, geometry).unwrap();
-    let y0 = model.forward_learned(z, &fixed, geometry).unwrap();
-    for b in 0..N_BANDS {
-        assert!(
-            (y[b] - y0[b]).abs() <= DUAL_VALUE_MAX_ERROR,
-            "dual value differs from f64 value"
-        );
-    }
-    let mut worst = 0.0f64;
-    for i in 0..N_LEARNED {
-        let range = LEARNED_BOUNDS[i][1] - LEARNED_BOUNDS[i][0];
-        let h = 1e-5 * range;
-        let mut zp = *z;
-        let mut zm = *z;
-        zp[i] += h;
-        zm[i] -= h;
-        let yp = model.forward_learned(&zp, &fixed, geometry).unwrap();
-        let ym = model.forward_learned(&zm, &fixed, geometry).unwrap();
-        for b in 0..N_BANDS {
-            assert!(
-                jac[b][i].is_finite(),
-                "non-finite derivative d{}/dz{i} at {z:?}",
-                magic_core::rtm::S2_BANDS[b]
-            );
-            let fd = (yp[b] - ym[b]) / (2.0 * h) * range;
-            let ex = jac[b][i] * range;
-            let err = (ex - fd).abs() / fd.abs().max(ex.abs()).max(1e-4);
-            worst = worst.max(err);
-        }
-    }
-    worst
-}
-
-fn box_point(u: &[f64; N_LEARNED]) -> [f64; N_LEARNED] {
-    let mut z = [0.0; N_LEARNED];
-    for i in 0..N_LEARNED {
-        z[i] = LEARNED_BOUNDS[i][0] + u[i] * (LEARNED_BOUNDS[i][1] - LEARNED_BOUNDS[i][0]);
-    }
-    z
-}
-
-#[test]
-fn jacobian_matches_central_differences_at_corners_and_centre() {
-    let d = data();
-    let model = Inform::new(d.tables.tables()).unwrap();
-    let mut worst = [0.0f64; 2];
-    let mut points = vec![[0.5; N_LEARNED]];
-    // All 128 corners of the box.
-    for mask in 0..(1u32 << N_LEARNED) {
-        let mut u = [0.0; N_LEARNED];
-        for (i, ui) in u.iter_mut().enumerate() {
-            *ui = ((mask >> i) & 1) as f64;
-        }
-        points.push(u);
-    }
-    for u in &points {
-        let z = box_point(u);
-        for (g, geometry) in [Geometry::Reference, Geometry::Physical]
-            .into_iter()
-            .enumerate()
-        {
-            worst[g] = worst[g].max(jacobian_error(&model, &z, geometry));
-        }
-    }
-    eprintln!(
-        "Jacobian vs central differences, centre + 128 corners: max relative error reference {:.3e}, physical {:.3e}",
-        worst[0], worst[1]
-    );
-    assert!(
-        worst[0] <= JACOBIAN_MAX_REL_ERROR && worst[1] <= JACOBIAN_MAX_REL_ERROR,
-        "{worst:?}"
-    );
-}
-
-/// The rows of all 13 bands, packed as the trainer packs them (rows with weight in some band).
-fn packed_rows(t: &OwnedTables) -> (Vec<f64>, Vec<f64>) {
-    let (mut spectral, mut weights) = (Vec::new(), Vec::new());
-    for i in 0..t.es.len() {
-        let w = &t.resampling[i * N_BANDS..(i + 1) * N_BANDS];
-        if w.iter().all(|x| *x == 0.0) {
-            continue;
-        }
-        spectral.extend(t.cols.iter().map(|c| c[i]));
-        spectral.extend([t.soil_dry[i], t.soil_wet[i], t.es[i], t.ed[i]]);
-        weights.extend_from_slice(w);
-    }
-    (spectral, weights)
-}
-
-#[test]
-fn packed_jacobian_in_f32_agrees_with_f64() {
-    let d = data();
-    let (spectral, weights) = packed_rows(&d.tables);
-    let p = magic_core::rtm::bands::Packed::new(
-        &spectral[..],
-        &weights[..],
-        &d.tables.beta[..],
-        N_BANDS,
-    )
-    .unwrap();
-    let fixed = Fixed::default();
-    let mut worst = 0.0f64;
-    for mask in 0..=(1u32 << N_LEARNED) {
-        // The 128 corners, then the centre.
-        let u: [f64; N_LEARNED] = core::array::from_fn(|i| {
-            if mask == 1 << N_LEARNED {
-                0.5
-            } else {
-                ((mask >> i) & 1) as f64
-            }
-        });
-        let z = box_point(&u);
-        for geometry in [Geometry::Reference, Geometry::Physical] {
-            let (mut y, mut jac) = ([0.0; N_BANDS], [[0.0; N_LEARNED]; N_BANDS]);
-            let (mut y32, mut jac32) = ([0.0; N_BANDS], [[0.0; N_LEARNED]; N_BANDS]);
-            p.jacobian(&z, &fixed, geometry, &mut y, &mut jac).unwrap();
-            p.jacobian_in::<f32>(&z, &fixed, geometry, &mut y32, &mut jac32)
-                .unwrap();
-            for b in 0..N_BANDS {
-                worst = worst.max((y32[b] - y[b]).abs() / y[b].abs());
-            }
-            for k in 0..N_LEARNED {
-                let range = LEARNED_BOUNDS[k][1] - LEARNED_BOUNDS[k][0];
-                let big = (0..N_BANDS)
-                    .map(|b| (jac[b][k] * range).abs())
-                    .fold(1e-4, f64::max);
-                for b in 0..N_BANDS {
-                    worst = worst.max((jac32[b][k] - jac[b][k]).abs() * range / big);
-                }
-            }
-        }
-    }
-    eprintln!("packed Jacobian f32 vs f64, centre + 128 corners: max relative error {worst:.3e}");
-    assert!(worst <= JACOBIAN_F32_VS_F64_MAX_REL_ERROR, "{worst:e}");
-}
-
-proptest::proptest! {
-    #![proptest_config(proptest::prelude::ProptestConfig { cases: 48, ..Default::default() })]
-
-    #[test]
-    fn jacobian_matches_central_differences_in_the_box(
-        u in proptest::array::uniform7(0.0f64..=1.0),
-        physical in proptest::bool::ANY,
-    ) {
-        let d = data();
-        let model = Inform::new(d.tables.tables()).unwrap();
-        let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
-        let err = jacobian_error(&model, &box_point(&u), geometry);
-        proptest::prop_assert!(err <= JACOBIAN_MAX_REL_ERROR, "relative error {err:e} at {u:?}");
-    }
-
-    #[test]
-    fn jacobian_is_finite_on_the_box_faces(
-        u in proptest::array::uniform7(0.0f64..=1.0),
-        face in 0usize..N_LEARNED,
-        high in proptest::bool::ANY,
-        physical in proptest::bool::ANY,
-    ) {
-        let d = data();
-        let model = Inform::new(d.tables.tables()).unwrap();
-        let mut u = u;
-        u[face] = if high { 1.0 } else { 0.0 };
-        let geometry = if physical { Geometry::Physical } else { Geometry::Reference };
-        let (y, jac) = model.jacobian(&box_point(&u), &Fixed::default(), geometry).unwrap();
-        for b in 0..N_BANDS {
-            proptest::prop_assert!(y[b].is_finite());
-            for i in 0..N_LEARNED {
-                proptest::prop_assert!(jac[b][i].is_finite(), "d{}/d{} at {u:?}", b, i);
-            }
-        }
     }
 }
 
