@@ -151,41 +151,12 @@ pub fn sd_columns(model: &Model<'_>) -> Vec<String> {
 /// they cannot be computed (e.g. fewer observed channels than variables plus one). Error rows
 /// stay error rows. Fails for a model without a forward model (variant A).
 pub fn invert_rows_sd(model: &Model<'_>, rows: &[ObsRow]) -> Result<Vec<String>> {
-    use magic_core::uncertainty::{standard_deviations, SdWorkspace};
     if model.variant == magic_core::Variant::A {
         return Err(anyhow!(
             "standard deviations need a forward model: this is a variant A model (use B or C)"
         ));
     }
-    let n_sd = sd_columns(model).len();
-    let (mut ws, mut sw) = (Workspace::default(), SdWorkspace::default());
-    Ok(rows
-        .iter()
-        .map(|row| {
-            let mut s = String::new();
-            let inv = match &row.obs {
-                Ok(obs) => invert_at::<f64>(model, obs, row.day(), &mut ws).map(|i| (obs, i)),
-                Err(msg) => {
-                    let _ = write!(s, "error,{}", msg.replace(',', ";"));
-                    return s;
-                }
-            };
-            match inv {
-                Ok((obs, inv)) => {
-                    let _ = write_result(&mut s, &inv);
-                    let u = standard_deviations(model, obs, &inv, row.day(), &mut sw).ok();
-                    for k in 0..n_sd {
-                        let sd = u.as_ref().map_or(f64::NAN, |u| u.sd[k]);
-                        let _ = write!(s, ",{}", sd as f32);
-                    }
-                }
-                Err(e) => {
-                    let _ = write_error(&mut s, &LineError::Invert(e));
-                }
-            }
-            s
-        })
-        .collect())
+    Ok(invert_lines(model, rows, Some(sd_columns(model).len())))
 }
 
 /// Result columns of an RTM inversion: the 7 learned variables, then the derived crown diameter
@@ -194,7 +165,14 @@ pub const RTM_RESULT_NAMES: [&str; 9] = ["N", "cab", "cw", "cm", "LAI", "LAIu", 
 
 /// Inverts rows on the host (physics in f64), returning one result line per row.
 pub fn invert_rows(model: &Model<'_>, rows: &[ObsRow]) -> Vec<String> {
-    let mut ws = Workspace::default();
+    invert_lines(model, rows, None)
+}
+
+/// The result line of every row, with the standard deviations of the first `n_sd` variables
+/// appended when `n_sd` is given.
+fn invert_lines(model: &Model<'_>, rows: &[ObsRow], n_sd: Option<usize>) -> Vec<String> {
+    use magic_core::uncertainty::{standard_deviations, SdWorkspace};
+    let (mut ws, mut sw) = (Workspace::default(), SdWorkspace::default());
     rows.iter()
         .map(|row| {
             let mut s = String::new();
@@ -202,6 +180,13 @@ pub fn invert_rows(model: &Model<'_>, rows: &[ObsRow]) -> Vec<String> {
                 Ok(obs) => match invert_at::<f64>(model, obs, row.day(), &mut ws) {
                     Ok(inv) => {
                         let _ = write_result(&mut s, &inv);
+                        if let Some(n) = n_sd {
+                            let u = standard_deviations(model, obs, &inv, row.day(), &mut sw).ok();
+                            for k in 0..n {
+                                let sd = u.as_ref().and_then(|u| u.sd.get(k));
+                                let _ = write!(s, ",{}", sd.map_or(f32::NAN, |v| *v as f32));
+                            }
+                        }
                     }
                     Err(e) => {
                         let _ = write_error(&mut s, &LineError::Invert(e));
