@@ -24,8 +24,17 @@ use rayon::prelude::*;
 use serde_json::json;
 use std::sync::{Arc, OnceLock};
 
-/// Grid points (x, y, depth km) with the projected pattern of a unit source at each.
-pub type SourceGrid = (Vec<[f64; 3]>, Vec<Vec<f64>>);
+/// The second-source search's grid, computed once per set of residuals (surrogates share it).
+#[derive(Debug)]
+pub struct SourceGrid {
+    /// Orthonormal basis of F's tangent space and the network's translations: the directions
+    /// a point source is not judged on.
+    pub basis: Vec<Vec<f64>>,
+    /// Grid points (x, y, depth km).
+    pub points: Vec<[f64; 3]>,
+    /// The pattern of a unit source at each point, projected off `basis`.
+    pub patterns: Vec<Vec<f64>>,
+}
 
 /// Fewest days of a split the analysis accepts.
 pub const MIN_DAYS: usize = 360;

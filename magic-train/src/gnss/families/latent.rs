@@ -13,6 +13,7 @@
 use crate::analysis::score::weighted_gain;
 use crate::analysis::surrogate::flip_reverse;
 use crate::gnss::GnssResiduals;
+use nalgebra::DMatrix;
 use rand::rngs::StdRng;
 
 /// Days on each side of a day whose residuals predict it (the best of these windows is taken:
@@ -150,6 +151,123 @@ pub fn loso_ab(g: &[f64], x: &Cross, ns: usize) -> (f64, f64) {
     (sa, sb)
 }
 
+/// `gᵀ C g / gᵀ g`: the residuals' variance along `g` that persists to the neighbouring days
+/// (the cross products with the neighbour means), fitted on every station at once.
+pub fn persistent_along(g: &[f64], x: &Cross) -> f64 {
+    let nc = x.nc;
+    let gg: f64 = g.iter().map(|v| v * v).sum();
+    if gg < DECLARED_NORM2 {
+        return 0.0;
+    }
+    let gcg: f64 = (0..nc)
+        .map(|a| g[a] * (0..nc).map(|b| x.c[a * nc + b] * g[b]).sum::<f64>())
+        .sum();
+    gcg / gg
+}
+
+/// [`loso_ab`] day by day, with nuisance patterns: `(Σ r·p, Σ p²)` of every row of `r`
+/// (window `w`), so that the gain can be taken over any interval of days. Each station's
+/// channels are predicted by `g · â`, where â is `g`'s amplitude in a least-squares fit of `g`
+/// and the `nuisance` patterns together to the other stations' neighbour means: what the
+/// nuisance explains (a network translation, say) is neither credited to `g` nor held against
+/// it. Without nuisance, summed over all days it is [`loso_ab`] of [`cross`]`(r, nc, w)`.
+pub fn loso_daily(
+    g: &[f64],
+    nuisance: &[Vec<f64>],
+    r: &[f64],
+    nc: usize,
+    ns: usize,
+    w: usize,
+) -> Vec<(f64, f64)> {
+    let t_n = r.len() / nc.max(1);
+    let gg: f64 = g.iter().map(|v| v * v).sum();
+    if gg < DECLARED_NORM2 || t_n < 2 {
+        return vec![(0.0, 0.0); t_n];
+    }
+    let nk = nc / ns;
+    let mut cols: Vec<&[f64]> = vec![g];
+    cols.extend(nuisance.iter().map(|v| v.as_slice()));
+    let k = cols.len();
+    let gm = DMatrix::<f64>::from_fn(nc, k, |c, j| cols[j][c]);
+    let gtg = gm.transpose() * &gm;
+    let largest = gtg.diagonal().max();
+    // Per station: the first row of the inverse Gram matrix of the other stations' channels
+    // (g's amplitude as a combination of the projections), or None where it is singular.
+    let rows: Vec<Option<Vec<f64>>> = (0..ns)
+        .map(|i| {
+            let ci: Vec<usize> = (0..nk).map(|q| q * ns + i).collect();
+            let gi = gm.select_rows(&ci);
+            let own = gi.transpose() * &gi;
+            if own[(0, 0)] == 0.0 {
+                return None;
+            }
+            let ch = (&gtg - &own).cholesky()?;
+            if ch.l().diagonal().iter().any(|d| d * d <= 1e-12 * largest) {
+                return None;
+            }
+            Some(ch.inverse().row(0).iter().copied().collect())
+        })
+        .collect();
+    let mut pre = vec![0.0; (t_n + 1) * nc];
+    for t in 0..t_n {
+        for c in 0..nc {
+            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
+        }
+    }
+    let mut m = vec![0.0; nc];
+    (0..t_n)
+        .map(|t| {
+            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
+            let kk = (hi - lo - 1) as f64;
+            let row = &r[t * nc..(t + 1) * nc];
+            for c in 0..nc {
+                m[c] = (pre[hi * nc + c] - pre[lo * nc + c] - row[c]) / kk;
+            }
+            let v: Vec<f64> = cols
+                .iter()
+                .map(|col| col.iter().zip(&m).map(|(a, b)| a * b).sum())
+                .collect();
+            let (mut rp, mut pp) = (0.0, 0.0);
+            for (i, a0) in rows.iter().enumerate() {
+                let Some(a0) = a0 else { continue };
+                let a: f64 = (0..k)
+                    .map(|j| {
+                        let vi: f64 = (0..nk).map(|q| cols[j][q * ns + i] * m[q * ns + i]).sum();
+                        a0[j] * (v[j] - vi)
+                    })
+                    .sum();
+                for q in 0..nk {
+                    let c = q * ns + i;
+                    let p = g[c] * a;
+                    rp += row[c] * p;
+                    pp += p * p;
+                }
+            }
+            (rp, pp)
+        })
+        .collect()
+}
+
+/// The largest [`weighted_gain`] over intervals of whole blocks of `block` days (at least
+/// `min_blocks` of them, up to the whole record) of day-by-day `(Σ r·p, Σ p²)`: the gain of a
+/// transient judged where it happens rather than diluted over the whole record.
+pub fn best_interval_gain(daily: &[(f64, f64)], block: usize, min_blocks: usize) -> f64 {
+    let mut pre = vec![(0.0, 0.0)];
+    for ch in daily.chunks(block.max(1)) {
+        let last = *pre.last().unwrap_or(&(0.0, 0.0));
+        let (a, b) = ch.iter().fold((0.0, 0.0), |s, d| (s.0 + d.0, s.1 + d.1));
+        pre.push((last.0 + a, last.1 + b));
+    }
+    let nb = pre.len() - 1;
+    let mut best = 0.0f64;
+    for a in 0..nb {
+        for b in a + min_blocks.clamp(1, nb.max(1))..=nb {
+            best = best.max(weighted_gain((pre[b].0 - pre[a].0, pre[b].1 - pre[a].1)));
+        }
+    }
+    best
+}
+
 /// The leave-one-station-out gain of pattern `g`.
 pub fn loso_gain(g: &[f64], x: &Cross, ns: usize) -> f64 {
     weighted_gain(loso_ab(g, x, ns))
@@ -281,6 +399,64 @@ mod tests {
         let m = (0..n).map(|t| r[2 * t]).sum::<f64>() / n as f64;
         let slow = (0..n).map(|t| (r[2 * t] - m).powi(2)).sum::<f64>();
         assert!(var(0, &out) < 0.05 * slow, "slow variance kept");
+    }
+
+    #[test]
+    fn day_by_day_sums_to_the_whole_record() {
+        let (ns, nc, w) = (5usize, 15usize, 4usize);
+        let r = noise(80 * nc, 41);
+        let g = noise(nc, 42);
+        let (a, b) = loso_ab(&g, &cross(&r, nc, w), ns);
+        let daily = loso_daily(&g, &[], &r, nc, ns, w);
+        let (da, db) = daily.iter().fold((0.0, 0.0), |s, d| (s.0 + d.0, s.1 + d.1));
+        assert!((a - da).abs() < 1e-9 * (1.0 + a.abs()), "{a} {da}");
+        assert!((b - db).abs() < 1e-9 * (1.0 + b.abs()), "{b} {db}");
+        let whole = weighted_gain((da, db));
+        assert!(best_interval_gain(&daily, 10, 1) >= whole);
+        assert!((best_interval_gain(&daily, 10, 8) - whole).abs() < 1e-12 * (1.0 + whole));
+    }
+
+    #[test]
+    fn day_by_day_with_nuisance_matches_a_direct_computation() {
+        let (ns, nc, t_n, w) = (4usize, 12usize, 50usize, 3usize);
+        let r = noise(t_n * nc, 51);
+        let g = noise(nc, 52);
+        let nu = vec![noise(nc, 53)];
+        let daily = loso_daily(&g, &nu, &r, nc, ns, w);
+        for t in [0usize, 17, 49] {
+            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
+            let m: Vec<f64> = (0..nc)
+                .map(|c| {
+                    (lo..hi)
+                        .filter(|&u| u != t)
+                        .map(|u| r[u * nc + c])
+                        .sum::<f64>()
+                        / (hi - lo - 1) as f64
+                })
+                .collect();
+            let (mut da, mut db) = (0.0, 0.0);
+            for i in 0..ns {
+                let others: Vec<usize> = (0..nc).filter(|c| c % ns != i).collect();
+                let go = DMatrix::from_fn(others.len(), 2, |p, j| [&g, &nu[0]][j][others[p]]);
+                let mo = nalgebra::DVector::from_fn(others.len(), |p, _| m[others[p]]);
+                let amp =
+                    (go.transpose() * &go).try_inverse().expect("invertible") * go.transpose() * mo;
+                for c in (0..nc).filter(|c| c % ns == i) {
+                    let p = g[c] * amp[0];
+                    da += r[t * nc + c] * p;
+                    db += p * p;
+                }
+            }
+            let (a, b) = daily[t];
+            assert!(
+                (a - da).abs() < 1e-9 * (1.0 + da.abs()),
+                "day {t}: {a} {da}"
+            );
+            assert!(
+                (b - db).abs() < 1e-9 * (1.0 + db.abs()),
+                "day {t}: {b} {db}"
+            );
+        }
     }
 
     #[test]

@@ -4,9 +4,23 @@
 //! the network's box widened by [`GRID_MARGIN_KM`] (depths 2–20 km) away from the main source,
 //! refined locally. A position on the bound of the grid is not a discovery: a far, deep source
 //! imitates a network-wide signal, and the search runs to the edge after it.
+//!
+//! **Located on all stations, scored on held-out ones, where it happens.** The position is the
+//! one whose pattern holds most of the residuals' persistent variance, fitted on every station
+//! at once (the ratio of the nearest station's motion to the others' fixes the depth). Its score
+//! is the leave-one-station-out gain, taken over its best interval of whole
+//! [`INTERVAL_BLOCK_DAYS`] blocks: a transient is not diluted by the years it is absent.
+//! Patterns are projected off the network's translations as well as off F's tangent space, and
+//! each held-out station's prediction fits the translation as a nuisance: a persistent common
+//! mode (reference frame, loading) neither draws the source to the deepest, farthest point,
+//! where its field is nearly uniform, nor counts for it. The surrogates remove the translation
+//! before they randomise each station's series (given a random sign per station, a common mode
+//! turns into a coherent pattern chance could credit to a source).
 
 use super::latent::{self, round3, Cross};
+use crate::analysis::projection::{orthonormal, project};
 use crate::analysis::Family;
+use crate::gnss::residuals::SourceGrid;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
 use crate::numerics::median;
@@ -19,7 +33,7 @@ use serde_json::json;
 /// Second-source candidates closer than this (km, horizontally) to the main source's median
 /// position are not considered: there the residual is the main source's misfit.
 pub const MAIN_SOURCE_EXCLUSION_KM: f64 = 3.0;
-/// Candidates refined in the search.
+/// Candidates refined in the search, per neighbour window.
 const SOURCE_CANDIDATES: usize = 6;
 /// How far (km) the search grid reaches beyond the stations' box.
 pub const GRID_MARGIN_KM: f64 = 3.0;
@@ -29,6 +43,11 @@ pub const GRID_DEPTHS: [f64; 13] = [
 ];
 /// A refined position closer than this (km) to a face of the grid's box sits on its bound.
 pub const BOUND_TOLERANCE_KM: f64 = 0.25;
+
+/// Days per block of the intervals a source is scored on (see [`search`]).
+pub const INTERVAL_BLOCK_DAYS: usize = 30;
+/// Fewest blocks of such an interval: a source's episode lasts months.
+pub const INTERVAL_MIN_BLOCKS: usize = 4;
 
 /// The second-source family.
 pub struct SecondSource;
@@ -44,13 +63,20 @@ pub struct SourceFit {
     pub score: f64,
 }
 
-/// Mogi pattern of a unit volume change at `p = (x, y, depth)` (standardised units, projected).
+/// Mogi pattern of a unit volume change at `p = (x, y, depth)` (standardised units, projected
+/// off F's tangent space and the network's translations).
 pub fn pattern(res: &GnssResiduals, p: [f64; 3]) -> Vec<f64> {
+    pattern_off(res, &grid(res).basis, p)
+}
+
+/// [`pattern`] projected off `basis`.
+fn pattern_off(res: &GnssResiduals, basis: &[Vec<f64>], p: [f64; 3]) -> Vec<f64> {
     let mut u = vec![0.0; res.nc()];
     if mogi::field(&res.ctx.network.stations, &[p[0], p[1], p[2], 1.0], &mut u).is_err() {
         return vec![0.0; res.nc()];
     }
-    res.project(
+    project(
+        basis,
         &u.iter()
             .zip(&res.ctx.scale)
             .map(|(v, s)| v / s)
@@ -58,11 +84,58 @@ pub fn pattern(res: &GnssResiduals, p: [f64; 3]) -> Vec<f64> {
     )
 }
 
+/// Orthonormal basis of F's tangent space and the network's translations (1 mm on every
+/// station of a component, standardised units).
+fn nuisance_basis(res: &GnssResiduals) -> Vec<Vec<f64>> {
+    let (ns, nc) = (res.ns(), res.nc());
+    let mut columns: Vec<(Vec<f64>, f64)> =
+        res.ctx.tangent.iter().map(|q| (q.clone(), 1.0)).collect();
+    for k in 0..nc / ns {
+        let g: Vec<f64> = (0..nc)
+            .map(|c| {
+                if c / ns == k {
+                    1.0 / res.ctx.scale[c]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        columns.push((g, s));
+    }
+    orthonormal(&columns, 1e-9, 2)
+}
+
+/// The network translations a source is fitted with when it is scored: the common-mode
+/// patterns F does not already produce.
+fn translations(res: &GnssResiduals) -> Vec<Vec<f64>> {
+    let mut ts = super::common_mode::patterns(res);
+    ts.retain(|t| t.iter().map(|v| v * v).sum::<f64>() >= latent::DECLARED_NORM2);
+    ts
+}
+
+/// The fitted source's pattern and the translations, orthonormal: what the surrogates remove
+/// before they randomise the rest (a network translation given a random sign per station would
+/// turn into a coherent pattern chance could credit to a source) and the bootstrap keeps.
+fn with_translations(res: &GnssResiduals, fit: &SourceFit) -> Vec<Vec<f64>> {
+    let mut cols = vec![pattern(res, fit.pos)];
+    cols.extend(translations(res));
+    let cols: Vec<(Vec<f64>, f64)> = cols
+        .into_iter()
+        .map(|g| {
+            let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            (g, s)
+        })
+        .collect();
+    orthonormal(&cols, 1e-9, 2)
+}
+
 /// The search grid (x, y over the network ± [`GRID_MARGIN_KM`] at 1 km spacing, depths
 /// [`GRID_DEPTHS`]), without the neighbourhood of the main source, with the projected pattern of
 /// each point (computed once per set of residuals: surrogates share it).
-fn grid(res: &GnssResiduals) -> &crate::gnss::residuals::SourceGrid {
+fn grid(res: &GnssResiduals) -> &SourceGrid {
     res.ctx.source_grid.get_or_init(|| {
+        let basis = nuisance_basis(res);
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         for s in &res.ctx.network.stations {
             x0 = x0.min(s.x_km);
@@ -85,8 +158,15 @@ fn grid(res: &GnssResiduals) -> &crate::gnss::residuals::SourceGrid {
             }
             x += 1.0;
         }
-        let patterns = pts.par_iter().map(|p| pattern(res, *p)).collect();
-        (pts, patterns)
+        let patterns = pts
+            .par_iter()
+            .map(|p| pattern_off(res, &basis, *p))
+            .collect();
+        SourceGrid {
+            basis,
+            points: pts,
+            patterns,
+        }
     })
 }
 
@@ -142,41 +222,51 @@ fn refine(
     (best, bg)
 }
 
-/// Every grid position scored over the whole split (cross products), the best few (distinct)
-/// refined locally.
+/// Candidate positions: per neighbour window, the grid points along whose pattern the
+/// residuals' persistent variance is largest ([`latent::persistent_along`], all stations), the best
+/// few (distinct) refined locally; the candidate whose leave-one-station-out gain over its best
+/// interval of days ([`latent::best_interval_gain`]) is largest wins.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
-    let ns = res.ns();
-    let (pts, patterns) = grid(res);
-    let mut cand: Vec<(f64, usize, usize)> = Vec::new();
-    for (wi, (_, x)) in xs.iter().enumerate() {
-        for (pi, g) in patterns.iter().enumerate() {
-            cand.push((latent::loso_gain(g, x, ns), wi, pi));
-        }
-    }
-    cand.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let mut chosen: Vec<(f64, usize, usize)> = Vec::new();
-    for c in cand {
-        if chosen.len() >= SOURCE_CANDIDATES {
-            break;
-        }
-        let p = pts[c.2];
-        if chosen
-            .iter()
-            .all(|d| (pts[d.2][0] - p[0]).hypot(pts[d.2][1] - p[1]) >= 2.0)
-        {
-            chosen.push(c);
-        }
-    }
+    let (ns, nc) = (res.ns(), res.nc());
+    let r = latent::highpass(&res.fit.r, nc, latent::LATENT_HIGHPASS_DAYS);
+    let ts = translations(res);
+    let SourceGrid {
+        points: pts,
+        patterns,
+        ..
+    } = grid(res);
     let mut best = SourceFit::default();
-    for (g0, wi, pi) in chosen {
-        let (w, x) = &xs[wi];
-        let (pos, gain) = refine(res, pts, pts[pi], g0, &|g| latent::loso_gain(g, x, ns));
-        if gain > best.score {
-            best = SourceFit {
-                pos,
-                window: *w,
-                score: gain,
-            };
+    for (w, x) in xs {
+        let mut cand: Vec<(f64, usize)> = patterns
+            .par_iter()
+            .enumerate()
+            .map(|(pi, g)| (latent::persistent_along(g, x), pi))
+            .collect();
+        cand.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut chosen: Vec<(f64, usize)> = Vec::new();
+        for c in cand {
+            if chosen.len() >= SOURCE_CANDIDATES {
+                break;
+            }
+            let p = pts[c.1];
+            if chosen
+                .iter()
+                .all(|d| (pts[d.1][0] - p[0]).hypot(pts[d.1][1] - p[1]) >= 2.0)
+            {
+                chosen.push(c);
+            }
+        }
+        for (q0, pi) in chosen {
+            let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
+            let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, *w);
+            let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
+            if gain > best.score {
+                best = SourceFit {
+                    pos,
+                    window: *w,
+                    score: gain,
+                };
+            }
         }
     }
     best.score /= res.ctx.total_fit.max(1e-300);
@@ -201,7 +291,7 @@ impl Family<GnssResiduals> for SecondSource {
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(res, &[pattern(res, fit.pos)], rng))
+        Ok(latent::surrogate(res, &with_translations(res, fit), rng))
     }
     /// Position, and from the daily volume change of the source (30-day running mean, relative
     /// to its median) the peak and the window around it where the change stays beyond twice its
@@ -254,7 +344,7 @@ impl Family<GnssResiduals> for SecondSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<String> {
-        let (lo, hi) = bounding_box(&grid(res).0);
+        let (lo, hi) = bounding_box(&grid(res).points);
         let names = ["x", "y", "depth"];
         (0..3)
             .find(|&k| {
@@ -280,7 +370,7 @@ impl Family<GnssResiduals> for SecondSource {
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Option<Result<GnssResiduals>> {
-        Some(Ok(latent::resample(res, &[pattern(res, fit.pos)], rng)))
+        Some(Ok(latent::resample(res, &with_translations(res, fit), rng)))
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {
         (fit.score > 0.0).then_some(OwnedEffect::SecondSource {
