@@ -44,7 +44,7 @@ pub const GRID_DEPTHS: [f64; 13] = [
 /// A refined position closer than this (km) to a face of the grid's box sits on its bound.
 pub const BOUND_TOLERANCE_KM: f64 = 0.25;
 
-/// Days per block of the intervals a source is scored on (see [`search`]).
+/// Days per block of the intervals a source is scored on (see the module documentation).
 pub const INTERVAL_BLOCK_DAYS: usize = 30;
 /// Fewest blocks of such an interval: a source's episode lasts months.
 pub const INTERVAL_MIN_BLOCKS: usize = 4;
