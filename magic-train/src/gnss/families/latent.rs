@@ -373,6 +373,21 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// Mean of the rows within ±w of row t, t excluded (directly).
+    fn neighbour_mean(r: &[f64], nc: usize, t: usize, w: usize) -> Vec<f64> {
+        let t_n = r.len() / nc;
+        let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
+        (0..nc)
+            .map(|c| {
+                (lo..hi)
+                    .filter(|&u| u != t)
+                    .map(|u| r[u * nc + c])
+                    .sum::<f64>()
+                    / (hi - lo - 1) as f64
+            })
+            .collect()
+    }
+
     fn noise(n: usize, seed: u64) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
         (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
@@ -424,16 +439,7 @@ mod tests {
         let nu = vec![noise(nc, 53)];
         let daily = loso_daily(&g, &nu, &r, nc, ns, w);
         for t in [0usize, 17, 49] {
-            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
-            let m: Vec<f64> = (0..nc)
-                .map(|c| {
-                    (lo..hi)
-                        .filter(|&u| u != t)
-                        .map(|u| r[u * nc + c])
-                        .sum::<f64>()
-                        / (hi - lo - 1) as f64
-                })
-                .collect();
+            let m = neighbour_mean(&r, nc, t, w);
             let (mut da, mut db) = (0.0, 0.0);
             for i in 0..ns {
                 let others: Vec<usize> = (0..nc).filter(|c| c % ns != i).collect();
@@ -467,16 +473,7 @@ mod tests {
         let (a, b) = loso_ab(&g, &cross(&r, nc, w), ns);
         let (mut da, mut db) = (0.0, 0.0);
         for t in 0..t_n {
-            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
-            let m: Vec<f64> = (0..nc)
-                .map(|c| {
-                    (lo..hi)
-                        .filter(|&u| u != t)
-                        .map(|u| r[u * nc + c])
-                        .sum::<f64>()
-                        / (hi - lo - 1) as f64
-                })
-                .collect();
+            let m = neighbour_mean(&r, nc, t, w);
             for i in 0..ns {
                 let others: Vec<usize> = (0..nc).filter(|c| c % ns != i).collect();
                 let amp = others.iter().map(|&c| g[c] * m[c]).sum::<f64>()
