@@ -41,22 +41,52 @@ pub struct LatentFit {
     pub window: usize,
 }
 
+/// Running sums of every channel over the rows (`sum[t * nc + c]`: rows before t), for window
+/// means in constant time.
+struct Prefix {
+    nc: usize,
+    t_n: usize,
+    sum: Vec<f64>,
+}
+
+impl Prefix {
+    fn new(r: &[f64], nc: usize) -> Prefix {
+        let t_n = r.len() / nc;
+        let mut sum = vec![0.0; (t_n + 1) * nc];
+        for t in 0..t_n {
+            for c in 0..nc {
+                sum[(t + 1) * nc + c] = sum[t * nc + c] + r[t * nc + c];
+            }
+        }
+        Prefix { nc, t_n, sum }
+    }
+
+    /// Sum of channel c over rows `lo..hi`.
+    fn sum(&self, c: usize, lo: usize, hi: usize) -> f64 {
+        self.sum[hi * self.nc + c] - self.sum[lo * self.nc + c]
+    }
+
+    /// `m`: the mean of the rows within ±w of row t (whose values are `row`), t excluded.
+    fn neighbour_mean(&self, row: &[f64], t: usize, w: usize, m: &mut [f64]) {
+        let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(self.t_n));
+        let k = (hi - lo - 1) as f64;
+        for (c, mc) in m.iter_mut().enumerate() {
+            *mc = (self.sum(c, lo, hi) - row[c]) / k;
+        }
+    }
+}
+
 /// Every channel less its running mean over ±h days (the mean of the days available at the ends):
 /// variations slower than about 2h days removed, faster ones kept.
 pub fn highpass(r: &[f64], nc: usize, h: usize) -> Vec<f64> {
     let t_n = r.len() / nc;
-    let mut pre = vec![0.0; (t_n + 1) * nc];
-    for t in 0..t_n {
-        for c in 0..nc {
-            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
-        }
-    }
+    let pre = Prefix::new(r, nc);
     let mut out = r.to_vec();
     for t in 0..t_n {
         let (lo, hi) = (t.saturating_sub(h), (t + h + 1).min(t_n));
         let k = (hi - lo) as f64;
         for c in 0..nc {
-            out[t * nc + c] -= (pre[hi * nc + c] - pre[lo * nc + c]) / k;
+            out[t * nc + c] -= pre.sum(c, lo, hi) / k;
         }
     }
     out
@@ -73,21 +103,12 @@ pub struct Cross {
 /// [`Cross`] of `r` for window `w`.
 pub fn cross(r: &[f64], nc: usize, w: usize) -> Cross {
     let t_n = r.len() / nc;
-    let mut pre = vec![0.0; (t_n + 1) * nc];
-    for t in 0..t_n {
-        for c in 0..nc {
-            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
-        }
-    }
+    let pre = Prefix::new(r, nc);
     let (mut cm, mut mm) = (vec![0.0; nc * nc], vec![0.0; nc * nc]);
     let mut m = vec![0.0; nc];
     for t in 0..t_n {
-        let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
-        let k = (hi - lo - 1) as f64;
         let row = &r[t * nc..(t + 1) * nc];
-        for c in 0..nc {
-            m[c] = (pre[hi * nc + c] - pre[lo * nc + c] - row[c]) / k;
-        }
+        pre.neighbour_mean(row, t, w, &mut m);
         for a in 0..nc {
             let (ra, ma) = (row[a], m[a]);
             let (crow, mrow) = (&mut cm[a * nc..(a + 1) * nc], &mut mm[a * nc..(a + 1) * nc]);
@@ -208,21 +229,12 @@ pub fn loso_daily(
             Some(ch.inverse().row(0).iter().copied().collect())
         })
         .collect();
-    let mut pre = vec![0.0; (t_n + 1) * nc];
-    for t in 0..t_n {
-        for c in 0..nc {
-            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
-        }
-    }
+    let pre = Prefix::new(r, nc);
     let mut m = vec![0.0; nc];
     (0..t_n)
         .map(|t| {
-            let (lo, hi) = (t.saturating_sub(w), (t + w + 1).min(t_n));
-            let kk = (hi - lo - 1) as f64;
             let row = &r[t * nc..(t + 1) * nc];
-            for c in 0..nc {
-                m[c] = (pre[hi * nc + c] - pre[lo * nc + c] - row[c]) / kk;
-            }
+            pre.neighbour_mean(row, t, w, &mut m);
             let v: Vec<f64> = cols
                 .iter()
                 .map(|col| col.iter().zip(&m).map(|(a, b)| a * b).sum())

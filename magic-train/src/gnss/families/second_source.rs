@@ -59,7 +59,7 @@ pub struct SourceFit {
     pub pos: [f64; 3],
     /// Neighbour window (days).
     pub window: usize,
-    /// Share of the residual variance explained.
+    /// Share of the residual variance explained (held-out, over the best interval of days).
     pub score: f64,
 }
 
