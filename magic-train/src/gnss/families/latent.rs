@@ -11,7 +11,7 @@
 //! series kept whole), then projected again like the residuals themselves.
 
 use crate::analysis::score::weighted_gain;
-use crate::analysis::surrogate::flip_reverse;
+use crate::analysis::surrogate::{flip_reverse, PhaseSurrogates};
 use crate::gnss::GnssResiduals;
 use nalgebra::DMatrix;
 use rand::rngs::StdRng;
@@ -349,11 +349,9 @@ pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -
     res.with_fit(res.project_rows(&r))
 }
 
-/// A latent family's bootstrap draw: the daily fits of `patterns` kept, the rest randomised as
-/// for the surrogates ([`surrogate`]) and added back.
-pub fn resample(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
-    let nc = res.nc();
-    let mut noise = res.fit.r.clone();
+/// `r` split into the daily fits of `patterns` (the effect) and the rest (the noise).
+fn split_effect(r: &[f64], nc: usize, patterns: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+    let mut noise = r.to_vec();
     let mut effect = vec![0.0; noise.len()];
     for g in patterns {
         let a = daily_amplitude(&noise, nc, g);
@@ -364,8 +362,38 @@ pub fn resample(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) ->
             }
         }
     }
+    (effect, noise)
+}
+
+/// A latent family's bootstrap draw: the daily fits of `patterns` kept, the rest randomised as
+/// for the surrogates ([`surrogate`]) and added back.
+pub fn resample(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
+    let nc = res.nc();
+    let (effect, noise) = split_effect(&res.fit.r, nc, patterns);
     let noise = res.project_rows(&flip_reverse(&noise, nc, res.ns(), rng));
     res.with_fit(noise.iter().zip(&effect).map(|(n, e)| n + e).collect())
+}
+
+/// A bootstrap draw that keeps the noise's network coherence: the daily fits of `patterns` kept,
+/// the rest phase-randomised with one random phase per frequency shared by every channel (each
+/// channel's spectrum and every cross-spectrum kept, [`PhaseSurrogates`]) and added back. For a
+/// parameter that moves the pattern (a source's position) the error comes from the noise along
+/// the pattern's derivatives, whose correlation between stations the per-station flips of
+/// [`resample`] would destroy. Noise with no part along the patterns keeps none, so this draw
+/// says nothing of an amplitude's error: it is for positions.
+pub fn resample_coherent(
+    res: &GnssResiduals,
+    patterns: &[Vec<f64>],
+    rng: &mut StdRng,
+) -> GnssResiduals {
+    res.with_fit(coherent_draw(&res.fit.r, res.nc(), patterns, rng))
+}
+
+/// The rows of [`resample_coherent`]'s draw from the rows `r`.
+fn coherent_draw(r: &[f64], nc: usize, patterns: &[Vec<f64>], rng: &mut StdRng) -> Vec<f64> {
+    let (effect, noise) = split_effect(r, nc, patterns);
+    let noise = PhaseSurrogates::new(&noise, nc).draw(rng);
+    noise.iter().zip(&effect).map(|(n, e)| n + e).collect()
 }
 
 /// Whether every pattern projects to (numerically) nothing: F already produces it.
@@ -403,6 +431,55 @@ mod tests {
     fn noise(n: usize, seed: u64) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
         (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    /// Zero-lag cross products of the channels (`nc × nc`).
+    fn cross_products(r: &[f64], nc: usize) -> Vec<f64> {
+        let mut m = vec![0.0; nc * nc];
+        for row in r.chunks(nc) {
+            for a in 0..nc {
+                for b in 0..nc {
+                    m[a * nc + b] += row[a] * row[b];
+                }
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn coherent_draw_keeps_the_effect_day_by_day_and_the_noise_cross_products() {
+        // Four channels over 400 days: a pattern with a slow amplitude, plus noise correlated
+        // between channels (a shared series and each channel's own).
+        let (nc, n) = (4usize, 400usize);
+        let g = vec![1.0, -0.5, 0.25, 2.0];
+        let (shared, own) = (noise(n, 1), noise(n * nc, 2));
+        let r: Vec<f64> = (0..n)
+            .flat_map(|t| {
+                let a = (t as f64 / 50.0).sin();
+                let (g, own, s) = (&g, &own, shared[t]);
+                (0..nc).map(move |c| a * g[c] + s + 0.5 * own[t * nc + c])
+            })
+            .collect();
+        let mut rng = StdRng::seed_from_u64(7);
+        let out = coherent_draw(&r, nc, &[g.clone()], &mut rng);
+        assert_ne!(out, r);
+        for (x, y) in daily_amplitude(&out, nc, &g)
+            .iter()
+            .zip(daily_amplitude(&r, nc, &g))
+        {
+            assert!((x - y).abs() < 1e-9, "daily amplitude {x} vs {y}");
+        }
+        let (noise_in, noise_out) = (
+            split_effect(&r, nc, &[g.clone()]).1,
+            split_effect(&out, nc, &[g]).1,
+        );
+        let (a, b) = (
+            cross_products(&noise_in, nc),
+            cross_products(&noise_out, nc),
+        );
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() < 1e-9 * a[0], "cross product {x} vs {y}");
+        }
     }
 
     #[test]

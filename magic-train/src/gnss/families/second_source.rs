@@ -15,7 +15,8 @@
 //! mode (reference frame, loading) neither draws the source to the deepest, farthest point,
 //! where its field is nearly uniform, nor counts for it. The surrogates remove the translation
 //! before they randomise each station's series (given a random sign per station, a common mode
-//! turns into a coherent pattern chance could credit to a source).
+//! turns into a coherent pattern chance could credit to a source). The bootstrap of the position
+//! keeps the noise's coherence between stations instead ([`latent::resample_coherent`]).
 
 use super::latent::{self, round3, Cross};
 use crate::analysis::projection::{orthonormal, project};
@@ -364,13 +365,19 @@ impl Family<GnssResiduals> for SecondSource {
             ("depth_km", fit.pos[2]),
         ]
     }
+    /// The fitted source and translations kept, the rest phase-randomised with phases shared by
+    /// every channel ([`latent::resample_coherent`]).
     fn resample(
         &self,
         res: &GnssResiduals,
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Option<Result<GnssResiduals>> {
-        Some(Ok(latent::resample(res, &with_translations(res, fit), rng)))
+        Some(Ok(latent::resample_coherent(
+            res,
+            &with_translations(res, fit),
+            rng,
+        )))
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {
         (fit.score > 0.0).then_some(OwnedEffect::SecondSource {
