@@ -461,18 +461,16 @@ mod tests {
             })
             .collect();
         let mut rng = StdRng::seed_from_u64(7);
-        let out = coherent_draw(&r, nc, &[g.clone()], &mut rng);
+        let gs = [g];
+        let out = coherent_draw(&r, nc, &gs, &mut rng);
         assert_ne!(out, r);
-        for (x, y) in daily_amplitude(&out, nc, &g)
+        for (x, y) in daily_amplitude(&out, nc, &gs[0])
             .iter()
-            .zip(daily_amplitude(&r, nc, &g))
+            .zip(daily_amplitude(&r, nc, &gs[0]))
         {
             assert!((x - y).abs() < 1e-9, "daily amplitude {x} vs {y}");
         }
-        let (noise_in, noise_out) = (
-            split_effect(&r, nc, &[g.clone()]).1,
-            split_effect(&out, nc, &[g]).1,
-        );
+        let (noise_in, noise_out) = (split_effect(&r, nc, &gs).1, split_effect(&out, nc, &gs).1);
         let (a, b) = (
             cross_products(&noise_in, nc),
             cross_products(&noise_out, nc),
