@@ -2,8 +2,9 @@
 //!
 //! For the bare-metal target (`target_os = "none"`) it
 //! * puts the memory layout on the linker search path as `memory.x` — `memory.x` (the measuring
-//!   build), `memory-rtm.x` (feature `rtm`) or `memory-uart.x` (the deployable build, feature
-//!   `uart`) — with an empty `device.x`, and links with cortex-m-rt's `link.x`;
+//!   build), `memory-rtm.x` (feature `rtm`), `memory-uart.x` (the deployable build, feature
+//!   `uart`) or, with the feature `sd`, `memory-sd.x` / `memory-uart-sd.x` — with an empty
+//!   `device.x`, and links with cortex-m-rt's `link.x`;
 //! * for the measuring build, embeds the model file named by the environment variable
 //!   `MAGIC_MODEL` (copied into `OUT_DIR` as `model.magic`, read by `include_bytes!`). A relative
 //!   path is taken from the workspace root. Without `MAGIC_MODEL` the build fails with a message
@@ -32,8 +33,12 @@ fn main() {
     let uart = env::var_os("CARGO_FEATURE_UART").is_some();
     let layout = if env::var_os("CARGO_FEATURE_RTM").is_some() {
         "memory-rtm.x"
-    } else if env::var_os("CARGO_FEATURE_SD").is_some() && !uart {
-        "memory-sd.x"
+    } else if env::var_os("CARGO_FEATURE_SD").is_some() {
+        if uart {
+            "memory-uart-sd.x"
+        } else {
+            "memory-sd.x"
+        }
     } else if uart {
         "memory-uart.x"
     } else {
@@ -43,6 +48,7 @@ fn main() {
     println!("cargo:rerun-if-changed=memory-rtm.x");
     println!("cargo:rerun-if-changed=memory-sd.x");
     println!("cargo:rerun-if-changed=memory-uart.x");
+    println!("cargo:rerun-if-changed=memory-uart-sd.x");
     if let Err(e) = fs::copy(manifest.join(layout), out.join("memory.x")) {
         fail(&format!(
             "cannot copy {layout} into OUT_DIR as memory.x: {e}"

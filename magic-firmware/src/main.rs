@@ -78,7 +78,8 @@ mod app;
 mod cost;
 #[cfg(all(target_os = "none", feature = "semihosting"))]
 mod io;
-#[cfg(all(target_os = "none", feature = "semihosting", feature = "sd"))]
+// Either build, with the feature `sd`.
+#[cfg(all(target_os = "none", feature = "sd"))]
 mod sd;
 
 // The deployable build.

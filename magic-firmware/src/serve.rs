@@ -8,7 +8,7 @@
 //! | a day: `[YYYY-MM-DD,]v1,…,vN` | `<id>,<result>` or `<id>,error,<message>`: the result line of `magic_core::line` behind the id (8 hex digits, the model file's CRC-32) of the model that inverted it; `none,error,no model…` without one |
 //! | `!model <size> <crc>` | `model,ready,<size>` (the target slot is erased) or `model,error,<why>` |
 //! | `:<hex>` (model bytes) | `model,<bytes so far>`; after the last byte `model,ok,<id>` (switched) or `model,error,<why>` (the running model stays) |
-//! | `!status` | `status,model=<id>,slot=…,reset=…,rx=…,slot_bytes=…,flash=…,statics=…,stack=…,stack_available=…` |
+//! | `!status` | `status,model=<id>,slot=…,reset=…,rx=…,slot_bytes=…,flash=…,statics=…,stack=…,stack_available=…[,sd=yes]` |
 //! | `!reset` | `reset`, then a system reset |
 //!
 //! Lines the board sends on its own start with `!`: `!ready,…` (the fields of `status`) after
@@ -16,6 +16,9 @@
 //! [`upload::TIMEOUT_MS`], or a line that is not model data in the middle of one (that line is
 //! then answered as usual) — and `!error,…` for lost input or a fault. The host may send ahead
 //! of the answers up to [`uart::RX_BUF`] bytes of unanswered lines (announced as `rx=`).
+//!
+//! Built with the feature `sd`, every result line also carries the variables' standard
+//! deviations (as `magic invert --sd` writes them) and the status says `sd=yes`.
 
 use crate::console::{Lines, Out};
 use crate::flash::RamFlash;
@@ -53,6 +56,12 @@ pub fn run() -> ! {
 
     let layout = Layout::linked();
     let (start, end) = layout.region();
+    #[cfg(feature = "sd")]
+    let Some(sd) = crate::sd::state() else {
+        let _ = out.write_str("!error,start-up: state already taken");
+        out.end_line();
+        reset::request(Cause::Fault)
+    };
     let mut board = Board {
         models,
         ids: [0; 2],
@@ -60,6 +69,8 @@ pub fn run() -> ! {
         store: Store::open(RamFlash::new(start, end), layout),
         upload: None,
         cause,
+        #[cfg(feature = "sd")]
+        sd,
     };
     if layout.fits::<RamFlash>() {
         board.boot();
@@ -151,6 +162,9 @@ struct Board {
     store: Store<RamFlash>,
     upload: Option<Upload>,
     cause: Cause,
+    /// The standard deviations' working memory (feature `sd`).
+    #[cfg(feature = "sd")]
+    sd: &'static mut crate::sd::SdState,
 }
 
 impl Board {
@@ -252,11 +266,14 @@ impl Board {
         let result =
             parse_record_bytes(text, model.needs_time(), &mut obs[..n_obs]).and_then(|day| {
                 invert_into::<f32, Linked>(model, &obs[..n_obs], day, ws, inv)
+                    .map(|()| day)
                     .map_err(LineError::Invert)
             });
         match result {
-            Ok(()) => {
+            Ok(_day) => {
                 let _ = write_result(out, inv);
+                #[cfg(feature = "sd")]
+                crate::sd::write_sds(out, model, &obs[..n_obs], _day, inv, self.sd);
             }
             Err(e) => {
                 let _ = out.write_str("error,");
@@ -425,6 +442,9 @@ impl Board {
             let _ = out.write_str(key);
             let _ = write_u32(out, v as u32);
         }
+        // Every result line carries the variables' standard deviations too.
+        #[cfg(feature = "sd")]
+        let _ = out.write_str(",sd=yes");
         if tag.starts_with('!') {
             out.end_line();
         }

@@ -11,7 +11,9 @@
 //!   is in, and failed or half-done uploads do not change it; a hung board is reset by the
 //!   watchdog, and the station sends the days that were in flight again;
 //! * the deployable ELF holds no semihosting trap (`bkpt 0xab`) and no panic is reachable in it;
-//! * `magic station` (the CLI path) writes one row per input row.
+//! * `magic station` (the CLI path) writes one row per input row;
+//! * the deployable firmware built with the feature `sd` answers with the variables' standard
+//!   deviations, as `magic invert --sd` writes them.
 //!
 //! Needs `qemu-system-arm`, the Rust target `thumbv7em-none-eabihf` and `llvm-tools`; without
 //! them the tests fail with a message saying how to install them, unless `MAGIC_SKIP_QEMU=1`.
@@ -34,6 +36,9 @@ const TIMEOUT_S: u64 = 300;
 /// range. Measured on these models: below 1e-5 (printed by the stream test); 1e-4 is the
 /// margin the semihosting test (firmware_qemu.rs) holds the board to as well.
 const HOST_TOLERANCE: f64 = 1e-4;
+/// The board's standard deviations (f64 in software from its f32 inversion) against the host's,
+/// relative: the bound of the measuring firmware's test (firmware_qemu.rs, measured 2.5e-6 there).
+const BOARD_SD_MAX_REL_ERROR: f64 = 2.5e-5;
 /// Days in the stream.
 const DAYS: usize = 10_000;
 
@@ -773,6 +778,97 @@ fn station_command_writes_one_row_per_input_row() {
     // Again: the board runs the model already (no upload), the same rows come back.
     opts.days = None;
     station::run_cli(&opts).expect("status only");
+}
+
+/// The deployable firmware built with the feature `sd` (`uart,sd`, memory-uart-sd.x) says so in
+/// its status, and `magic station` writes the variables' standard deviations after `magic
+/// invert`'s columns, as `magic invert --sd` does, within [`BOARD_SD_MAX_REL_ERROR`] of the
+/// host's; the build links with the panic-never handler too.
+#[test]
+fn deployable_firmware_with_standard_deviations() {
+    if !toolchain_ready() {
+        return;
+    }
+    let bytes = model(43);
+    let m = Model::decode(&bytes).unwrap();
+    let dir = temp_dir();
+    let model_path = dir.join("sd.magic");
+    std::fs::write(&model_path, &bytes).unwrap();
+    let (full, _) = days(&m, "sd-all.csv");
+    let text = std::fs::read_to_string(full).unwrap();
+    let input = dir.join("sd.csv");
+    std::fs::write(
+        &input,
+        text.lines().take(31).collect::<Vec<_>>().join("\n") + "\n",
+    )
+    .unwrap();
+
+    let elf = build_deployable(&["sd"]).expect("building the deployable firmware with `sd`");
+    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
+    assert!(connect(&mut qemu).status.sd, "the status says sd=yes");
+    let output = dir.join("sd-out.csv");
+    station::run_cli(&station::Options {
+        port: qemu.address(),
+        model: Some(model_path),
+        days: Some(input.clone()),
+        output: Some(output.clone()),
+        standardized: false,
+    })
+    .expect("30 good rows");
+    let header = std::fs::read_to_string(&output).unwrap();
+    let sd_names = records::sd_columns(&m);
+    assert!(
+        header
+            .lines()
+            .next()
+            .unwrap()
+            .ends_with(&sd_names.join(",")),
+        "{header}"
+    );
+    let out = station::read_output(&output).unwrap();
+    let host = records::invert_rows_sd(&m, &records::read_obs(&input, &m, false).unwrap()).unwrap();
+    assert_eq!(out.len(), 30, "one row per input row");
+    let (n, k) = (m.n_params(), sd_names.len());
+    let mut worst = 0f64;
+    for (i, ((id, board), h)) in out.iter().zip(&host).enumerate() {
+        assert_eq!(*id, station::model_id(&bytes), "row {i}");
+        agrees(&m, board, h, &format!("row {i}"));
+        let (b, h): (Vec<&str>, Vec<&str>) = (board.split(',').collect(), h.split(',').collect());
+        assert_eq!(b.len(), n + 3 + k, "row {i}: {board}");
+        for j in n + 3..n + 3 + k {
+            let (x, y): (f64, f64) = (b[j].parse().unwrap(), h[j].parse().unwrap());
+            assert_eq!(
+                x.is_finite(),
+                y.is_finite(),
+                "row {i} field {j}: {x} vs {y}"
+            );
+            if y.is_finite() {
+                let rel = (x - y).abs() / y.abs().max(1e-12);
+                assert!(
+                    rel <= BOARD_SD_MAX_REL_ERROR,
+                    "row {i} field {j}: board {x}, host {y}"
+                );
+                worst = worst.max(rel);
+            }
+        }
+    }
+    // The stack's high-water mark after the standard deviations, within the budget.
+    let st = connect(&mut qemu).status;
+    let field = |k: &str| -> usize {
+        let v = st.fields.iter().find(|f| f.0 == k).map(|f| f.1.as_str());
+        v.and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("status field {k}: {:?}", st.fields))
+    };
+    let (stack, available) = (field("stack"), field("stack_available"));
+    assert!(stack < available, "stack {stack} of {available} bytes");
+    eprintln!(
+        "deployable firmware with `sd`: standard deviations within {worst:.2e} of the host's; flash {} bytes, statics {} bytes, stack {stack} of {available} bytes",
+        field("flash"),
+        field("statics")
+    );
+    drop(qemu);
+    build_deployable(&["sd", "panic-never"])
+        .expect("the deployable `sd` firmware must link with the panic-never handler");
 }
 
 #[test]

@@ -149,7 +149,7 @@ pub fn matvec_i8_packed(w: &[u8], rows: usize, cols: usize, xp: &[u32], acc: &mu
         // `LDM` needs word-aligned weights: the exporter aligns every int8 layer's weights
         // in the file (and the firmware the file), and a block's size 4 · cols keeps the
         // alignment when cols % 4 == 0. Otherwise every group runs in the `LDR` loop.
-        let aligned = (w.as_ptr() as usize) % 4 == 0 && tail == 0;
+        let aligned = (w.as_ptr() as usize) & 3 == 0 && tail == 0;
         let (single16, quads64) = if aligned {
             (16 * (groups % 4), 64 * (groups / 4))
         } else {

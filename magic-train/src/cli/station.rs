@@ -18,7 +18,9 @@ pub struct StationCmd {
     /// Observation CSV, as for `magic invert` (needs --model).
     #[arg(long)]
     days: Option<PathBuf>,
-    /// Result CSV: the date, the model id, then `magic invert`'s columns (default: stdout).
+    /// Result CSV: the date, the model id, then `magic invert`'s columns, and the `*_sd`
+    /// columns of `magic invert --sd` when the board's firmware has the feature `sd` (default:
+    /// stdout).
     #[arg(long)]
     output: Option<PathBuf>,
     /// The days hold standardised values.

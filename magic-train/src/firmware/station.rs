@@ -173,6 +173,9 @@ pub struct BoardStatus {
     pub rx: usize,
     /// The largest model a slot holds, bytes.
     pub slot_bytes: usize,
+    /// Whether every result line carries the variables' standard deviations too (`sd=yes`: a
+    /// firmware built with the feature `sd`).
+    pub sd: bool,
     /// Every `key=value` field as sent.
     pub fields: Vec<(String, String)>,
 }
@@ -196,6 +199,7 @@ impl BoardStatus {
             reset: get("reset").unwrap_or("").to_string(),
             rx: num("rx")?,
             slot_bytes: num("slot_bytes").unwrap_or(0),
+            sd: get("sd") == Some("yes"),
             fields,
         })
     }
@@ -519,7 +523,7 @@ pub fn run_cli(o: &Options) -> Result<()> {
         eprintln!("board, before day {at} of the stream: {e:?}");
     }
     let mut answers = t.answers.into_iter();
-    let text = output_rows(&model, &rows, &lines, &mut answers);
+    let text = output_rows(&model, &rows, &lines, &mut answers, st.status.sd);
     match &o.output {
         Some(p) => {
             std::fs::write(p, &text).with_context(|| format!("{}: cannot write", p.display()))?
@@ -549,12 +553,14 @@ pub fn run_cli(o: &Options) -> Result<()> {
 
 /// The result CSV: a header, then one row per input row: the date (if the input has one), the
 /// model id, and the result as `magic invert` writes it (host-side errors as `magic invert`
-/// writes them, with an empty model).
+/// writes them, with an empty model). With `sd` (the board says `sd=yes`) the header names the
+/// standard deviations' columns too, as `magic invert --sd` writes them.
 fn output_rows(
     model: &Model<'_>,
     rows: &[ObsRow],
     lines: &[Option<String>],
     answers: &mut impl Iterator<Item = Option<Answer>>,
+    sd: bool,
 ) -> String {
     let with_date = rows.iter().any(|r| r.date.is_some());
     let mut text = String::new();
@@ -563,6 +569,12 @@ fn output_rows(
     }
     text.push_str("model,");
     text.push_str(&records::result_header(model, false));
+    if sd {
+        for c in records::sd_columns(model) {
+            text.push(',');
+            text.push_str(&c);
+        }
+    }
     text.push('\n');
     for (row, line) in rows.iter().zip(lines) {
         if with_date {
