@@ -632,6 +632,9 @@ mod tests {
         assert_eq!((s.rx, s.slot_bytes), (1024, 24576));
         let none = BoardStatus::parse("status,model=none,slot=none,reset=power-on,rx=512").unwrap();
         assert_eq!((none.model, none.slot, none.rx), (None, None, 512));
+        assert!(!s.sd && !none.sd);
+        let sd = BoardStatus::parse("status,model=none,rx=512,stack=10712,sd=yes").unwrap();
+        assert!(sd.sd);
         assert!(BoardStatus::parse("model,ok,12345678").is_none());
     }
 
