@@ -31,9 +31,11 @@
 
 use crate::firmware::qemu::{artifact_path, workspace_root, BUILD, PROFILE, TARGET};
 use anyhow::{bail, Context, Result};
-use std::net::{TcpListener, TcpStream};
+use std::io::{BufRead, BufReader};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 /// Builds the deployable firmware (`--no-default-features --features uart`, plus `extra`
@@ -70,6 +72,23 @@ pub fn build_deployable(extra: &[&str]) -> Result<PathBuf> {
     Ok(copy)
 }
 
+/// How long QEMU may take to say on which port it listens.
+const QEMU_START_TIMEOUT: Duration = Duration::from_secs(20);
+
+/// The port of QEMU's `… QEMU waiting for connection on: disconnected:tcp:127.0.0.1:<port>,server=on`.
+fn listening_port(line: &str) -> Option<u16> {
+    let address = line.split("waiting for connection on:").nth(1)?;
+    let after = address.split("tcp:").nth(1)?;
+    after
+        .split(',')
+        .next()?
+        .rsplit(':')
+        .next()?
+        .trim()
+        .parse()
+        .ok()
+}
+
 /// A QEMU `mps2-an386` running a firmware with UART0 on a local TCP port; killed on drop.
 pub struct UartQemu {
     child: Child,
@@ -80,25 +99,57 @@ pub struct UartQemu {
 impl UartQemu {
     /// Starts QEMU with `elf` and UART0 on a free local port, waiting until it listens. The board
     /// starts when the first client connects.
+    ///
+    /// QEMU binds the port itself (port 0: the system's choice) and says which on its standard
+    /// error: a port found free here and handed to QEMU could be taken by another process
+    /// (another test's QEMU, or the local end of a connection) before QEMU binds it.
     pub fn start(elf: &Path) -> Result<UartQemu> {
-        // A free port: bind, read it, release it for QEMU.
-        let port = TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-        let serial = format!("tcp:127.0.0.1:{port},server=on,wait=on,nodelay=on");
-        let child = Command::new("qemu-system-arm")
+        let mut child = Command::new("qemu-system-arm")
             .args(["-machine", "mps2-an386", "-cpu", "cortex-m4"])
             .args(["-accel", "tcg,thread=single"])
             .args(["-display", "none", "-monitor", "none"])
-            .args(["-serial", &serial])
+            .args(["-serial", "tcp:127.0.0.1:0,server=on,wait=on,nodelay=on"])
             .arg("-kernel")
             .arg(elf)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(Stdio::piped())
             .spawn()
             .context(
                 "starting qemu-system-arm (see magic_train::firmware::qemu::ensure_toolchain)",
             )?;
-        Ok(UartQemu { child, port })
+        let stderr = child.stderr.take().context("QEMU's standard error")?;
+        let (tx, rx) = mpsc::channel();
+        // Reads QEMU's standard error to its end (so that QEMU never blocks on it), sending the
+        // port once it is said, or what QEMU said if it ends first.
+        std::thread::spawn(move || {
+            let mut said = Vec::new();
+            let mut sent = false;
+            for line in BufReader::new(stderr).lines() {
+                let Ok(line) = line else { break };
+                if !sent {
+                    if let Some(port) = listening_port(&line) {
+                        sent = tx.send(Ok(port)).is_ok();
+                    } else {
+                        said.push(line);
+                    }
+                }
+            }
+            if !sent {
+                let _ = tx.send(Err(said.join("\n")));
+            }
+        });
+        let mut qemu = UartQemu { child, port: 0 };
+        match rx.recv_timeout(QEMU_START_TIMEOUT) {
+            Ok(Ok(port)) => {
+                qemu.port = port;
+                Ok(qemu)
+            }
+            Ok(Err(said)) => bail!("QEMU ended before listening on a port: {said}"),
+            Err(_) => {
+                bail!("QEMU did not say on which port it listens within {QEMU_START_TIMEOUT:?}")
+            }
+        }
     }
 
     /// `tcp:127.0.0.1:<port>`, the station's `--port`.
@@ -215,4 +266,20 @@ pub fn semihosting_calls(elf: &Path) -> Result<Vec<String>> {
         );
     }
     Ok(found)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_port_is_read_from_qemus_message() {
+        let line = "qemu-system-arm: -serial tcp:127.0.0.1:0,server=on,wait=on,nodelay=on: info: \
+                    QEMU waiting for connection on: disconnected:tcp:127.0.0.1:33049,server=on";
+        assert_eq!(listening_port(line), Some(33049));
+        assert_eq!(
+            listening_port("qemu-system-arm: -kernel x: No such file"),
+            None
+        );
+    }
 }
