@@ -235,7 +235,7 @@ fn drift(tp: &serde_json::Value, p: &serde_json::Value) -> (bool, String) {
 pub fn compare(family: &str, tp: &serde_json::Value, p: &serde_json::Value) -> (bool, String) {
     match family {
         "step" => step(tp, p),
-        "second_source" => second_source(tp, p),
+        "second_source" | "lasting_source" => second_source(tp, p),
         "elevation" => elevation(tp, p),
         "common_mode" => common_mode(tp, p),
         "seasonal" => seasonal(tp, p),
@@ -263,6 +263,14 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
         params_ok,
         detail,
     }
+}
+
+/// Whether two families declare the same term of F: a second source found as an episode
+/// (`second_source`) or as a change that stays (`lasting_source`) is the same source, so one
+/// found beside the other injected is not a false addition.
+pub fn same_effect(a: &str, b: &str) -> bool {
+    let source = |f: &str| f == "second_source" || f == "lasting_source";
+    a == b || (source(a) && source(b))
 }
 
 /// Compares an analysis's candidates (ranked, as [`Analysis::effects`]) with a truth of
@@ -302,7 +310,9 @@ pub fn recovery(truth: &serde_json::Value, candidates: &[Candidate]) -> Recovery
         top: ranked.first().map_or(String::new(), |c| c.family.clone()),
         effects: effects.iter().map(|e| found(e, &ranked)).collect(),
         false_additions: significant(&|c| {
-            c.effect.is_some() && !is_injected(&c.family) && !in_bg(&c.family)
+            c.effect.is_some()
+                && !effects.iter().any(|e| same_effect(&e.family, &c.family))
+                && !in_bg(&c.family)
         }),
         background_found: significant(&|c| in_bg(&c.family)),
     }

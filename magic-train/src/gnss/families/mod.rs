@@ -9,6 +9,7 @@ pub mod common_mode;
 pub mod dated;
 pub mod drift;
 pub mod elevation;
+pub mod lasting_source;
 pub mod latent;
 pub mod seasonal;
 pub mod second_source;
@@ -25,6 +26,7 @@ pub fn all() -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
         Box::new(elevation::Elevation),
         Box::new(step::Step),
         Box::new(second_source::SecondSource),
+        Box::new(lasting_source::LastingSource),
         Box::new(drift::Drift),
     ]
 }

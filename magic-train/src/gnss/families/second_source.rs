@@ -109,17 +109,17 @@ fn nuisance_basis(res: &GnssResiduals) -> Vec<Vec<f64>> {
 
 /// The network translations a source is fitted with when it is scored: the common-mode
 /// patterns F does not already produce.
-fn translations(res: &GnssResiduals) -> Vec<Vec<f64>> {
+pub(super) fn translations(res: &GnssResiduals) -> Vec<Vec<f64>> {
     let mut ts = super::common_mode::patterns(res);
     ts.retain(|t| t.iter().map(|v| v * v).sum::<f64>() >= latent::DECLARED_NORM2);
     ts
 }
 
-/// The fitted source's pattern and the translations, orthonormal: what the surrogates remove
-/// before they randomise the rest (a network translation given a random sign per station would
-/// turn into a coherent pattern chance could credit to a source) and the bootstrap keeps.
-fn with_translations(res: &GnssResiduals, fit: &SourceFit) -> Vec<Vec<f64>> {
-    let mut cols = vec![pattern(res, fit.pos)];
+/// The pattern of a source at `pos` and the translations, orthonormal: what the surrogates
+/// remove before they randomise the rest (a network translation given a random sign per station
+/// would turn into a coherent pattern chance could credit to a source) and the bootstrap keeps.
+pub(super) fn with_translations(res: &GnssResiduals, pos: [f64; 3]) -> Vec<Vec<f64>> {
+    let mut cols = vec![pattern(res, pos)];
     cols.extend(translations(res));
     let cols: Vec<(Vec<f64>, f64)> = cols
         .into_iter()
@@ -134,7 +134,7 @@ fn with_translations(res: &GnssResiduals, fit: &SourceFit) -> Vec<Vec<f64>> {
 /// The search grid (x, y over the network ± [`GRID_MARGIN_KM`] at 1 km spacing, depths
 /// [`GRID_DEPTHS`]), without the neighbourhood of the main source, with the projected pattern of
 /// each point (computed once per set of residuals: surrogates share it).
-fn grid(res: &GnssResiduals) -> &SourceGrid {
+pub(super) fn grid(res: &GnssResiduals) -> &SourceGrid {
     res.ctx.source_grid.get_or_init(|| {
         let basis = nuisance_basis(res);
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
@@ -184,7 +184,7 @@ fn bounding_box(pts: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
 
 /// Local pattern search of a position maximising `score`, from `best`, inside the grid's box
 /// and outside the main source's neighbourhood.
-fn refine(
+pub(super) fn refine(
     res: &GnssResiduals,
     pts: &[[f64; 3]],
     mut best: [f64; 3],
@@ -223,6 +223,29 @@ fn refine(
     (best, bg)
 }
 
+/// The `k` best of `scored` grid points (score, index), at least 2 km apart horizontally.
+pub(super) fn distinct_best(
+    mut scored: Vec<(f64, usize)>,
+    pts: &[[f64; 3]],
+    k: usize,
+) -> Vec<(f64, usize)> {
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut chosen: Vec<(f64, usize)> = Vec::new();
+    for c in scored {
+        if chosen.len() >= k {
+            break;
+        }
+        let p = pts[c.1];
+        if chosen
+            .iter()
+            .all(|d| (pts[d.1][0] - p[0]).hypot(pts[d.1][1] - p[1]) >= 2.0)
+        {
+            chosen.push(c);
+        }
+    }
+    chosen
+}
+
 /// Candidate positions: per neighbour window, the grid points along whose pattern the
 /// residuals' persistent variance is largest ([`latent::persistent_along`], all stations), the best
 /// few (distinct) refined locally; the candidate whose leave-one-station-out gain over its best
@@ -238,26 +261,12 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     } = grid(res);
     let mut best = SourceFit::default();
     for (w, x) in xs {
-        let mut cand: Vec<(f64, usize)> = patterns
+        let scored = patterns
             .par_iter()
             .enumerate()
             .map(|(pi, g)| (latent::persistent_along(g, x), pi))
             .collect();
-        cand.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let mut chosen: Vec<(f64, usize)> = Vec::new();
-        for c in cand {
-            if chosen.len() >= SOURCE_CANDIDATES {
-                break;
-            }
-            let p = pts[c.1];
-            if chosen
-                .iter()
-                .all(|d| (pts[d.1][0] - p[0]).hypot(pts[d.1][1] - p[1]) >= 2.0)
-            {
-                chosen.push(c);
-            }
-        }
-        for (q0, pi) in chosen {
+        for (q0, pi) in distinct_best(scored, pts, SOURCE_CANDIDATES) {
             let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
             let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, *w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
@@ -272,6 +281,20 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     }
     best.score /= res.ctx.total_fit.max(1e-300);
     best
+}
+
+/// Why a source at `pos` cannot count as a discovery: on the bound of the search grid.
+pub(super) fn on_bound(res: &GnssResiduals, pos: [f64; 3]) -> Option<String> {
+    let (lo, hi) = bounding_box(&grid(res).points);
+    let names = ["x", "y", "depth"];
+    (0..3)
+        .find(|&k| pos[k] - lo[k] < BOUND_TOLERANCE_KM || hi[k] - pos[k] < BOUND_TOLERANCE_KM)
+        .map(|k| {
+            format!(
+                "on the bound of the search grid ({} {:.1} km in [{:.1}, {:.1}])",
+                names[k], pos[k], lo[k], hi[k]
+            )
+        })
 }
 
 impl Family<GnssResiduals> for SecondSource {
@@ -292,7 +315,11 @@ impl Family<GnssResiduals> for SecondSource {
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(res, &with_translations(res, fit), rng))
+        Ok(latent::surrogate(
+            res,
+            &with_translations(res, fit.pos),
+            rng,
+        ))
     }
     /// Position, and from the daily volume change of the source (30-day running mean, relative
     /// to its median) the peak and the window around it where the change stays beyond twice its
@@ -345,18 +372,7 @@ impl Family<GnssResiduals> for SecondSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<String> {
-        let (lo, hi) = bounding_box(&grid(res).points);
-        let names = ["x", "y", "depth"];
-        (0..3)
-            .find(|&k| {
-                fit.pos[k] - lo[k] < BOUND_TOLERANCE_KM || hi[k] - fit.pos[k] < BOUND_TOLERANCE_KM
-            })
-            .map(|k| {
-                format!(
-                    "on the bound of the search grid ({} {:.1} km in [{:.1}, {:.1}])",
-                    names[k], fit.pos[k], lo[k], hi[k]
-                )
-            })
+        on_bound(res, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
         vec![
@@ -375,7 +391,7 @@ impl Family<GnssResiduals> for SecondSource {
     ) -> Option<Result<GnssResiduals>> {
         Some(Ok(latent::resample_coherent(
             res,
-            &with_translations(res, fit),
+            &with_translations(res, fit.pos),
             rng,
         )))
     }

@@ -170,3 +170,20 @@ fn the_table_counts_per_scenario_placement_and_noise() {
         "| step | test | red | 1 | 1/1 | 1/1 | 1/1 | 0/1 | - | 1/1 |"
     );
 }
+
+#[test]
+fn a_source_found_as_the_other_time_course_is_not_a_false_addition() {
+    let src = json!({"x_km": 4.0, "y_km": -2.0, "depth_km": 5.0});
+    let truth = json!({"scenario": "second_source", "noise": "paper", "placement": "train",
+        "effects": [{"family": "second_source", "params": src}], "background": []});
+    let r = recovery(
+        &truth,
+        &[
+            cand("second_source", true, src.clone()),
+            cand("lasting_source", true, src.clone()),
+            cand("drift", true, json!({})),
+        ],
+    );
+    assert_eq!(r.false_additions, ["drift"]);
+    assert!(same_effect("lasting_source", "second_source") && !same_effect("step", "drift"));
+}

@@ -56,6 +56,10 @@ impl Injection {
             Injection::Seasonal => "seasonal",
             Injection::Elevation => "elevation",
             Injection::Step => "step",
+            Injection::SecondSource {
+                shape: Shape::Lasting,
+                ..
+            } => "lasting_source",
             Injection::SecondSource { .. } => "second_source",
             Injection::Drift => "drift",
         }

@@ -1,0 +1,389 @@
+//! `lasting_source`: a point source whose volume changes at one epoch and stays changed — a
+//! lasting deflation, a reservoir that drained. Declared, it is the same term as a
+//! [`second_source`](super::second_source) (one variable, its ΔV, inferred every day); found
+//! apart from it because its evidence lies elsewhere: an episode shows in the day-to-day
+//! persistence of the residuals over its months, a change that stays in the difference of the
+//! residuals' means before and after its onset over all the years that follow, which the
+//! episodes' ±365-day high-pass would reduce to a bump of half its size around the onset. Each
+//! has its own chance level: judged against the other's surrogate scores, either would be lost
+//! in the other's chance.
+//!
+//! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
+//! second source's grid, bound rule and refinement) whose pattern the network's offsets at some
+//! epoch follow best — mean over [`SCAN_DAYS`] days after less mean over those before, every
+//! [`SCAN_SPACING`] days, counting products of different stations only. Each is scored by
+//! predicting every station from the others ([`lasting_gain`]); the network translations are a
+//! nuisance there and are removed before the surrogates randomise each station's series, as for
+//! the second source.
+
+use super::latent::{self, round3};
+use super::second_source::{
+    distinct_best, grid, on_bound, pattern, refine, translations, with_translations,
+};
+use crate::analysis::score::weighted_gain;
+use crate::analysis::Family;
+use crate::gnss::residuals::SourceGrid;
+use crate::gnss::GnssResiduals;
+use crate::model::OwnedEffect;
+use anyhow::Result;
+use nalgebra::{DMatrix, DVector};
+use rand::rngs::StdRng;
+use rayon::prelude::*;
+use serde_json::json;
+
+/// Candidates refined in the search.
+const CANDIDATES: usize = 3;
+/// Days on each side of an epoch whose mean difference is the network's offset there
+/// ([`offsets`]).
+pub const SCAN_DAYS: usize = 180;
+/// Days between the scanned epochs.
+pub const SCAN_SPACING: usize = 30;
+
+/// The lasting-source family.
+pub struct LastingSource;
+
+/// A fitted change that stays: position, onset and score.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LastingFit {
+    /// x, y, depth (km).
+    pub pos: [f64; 3],
+    /// Row of the analysed block where the change begins.
+    pub onset: usize,
+    /// Share of the residual variance explained (held-out stations).
+    pub score: f64,
+}
+
+/// The network's offsets: at each scanned epoch (row `SCAN_DAYS + k · SCAN_SPACING`), every
+/// channel's mean over the [`SCAN_DAYS`] rows after less its mean over those before.
+fn offsets(r: &[f64], nc: usize) -> Vec<(usize, Vec<f64>)> {
+    let t_n = r.len() / nc.max(1);
+    let w = SCAN_DAYS;
+    let mut pre = vec![0.0; (t_n + 1) * nc];
+    for t in 0..t_n {
+        for c in 0..nc {
+            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
+        }
+    }
+    (w..(t_n + 1).saturating_sub(w))
+        .step_by(SCAN_SPACING)
+        .map(|t| {
+            let d = (0..nc)
+                .map(|c| {
+                    let after = pre[(t + w) * nc + c] - pre[t * nc + c];
+                    let before = pre[t * nc + c] - pre[(t - w) * nc + c];
+                    (after - before) / w as f64
+                })
+                .collect();
+            (t, d)
+        })
+        .collect()
+}
+
+/// `(gᵀd)² / gᵀg` over pairs of channels of different stations (`ns` stations, channel `c` of
+/// station `c % ns`): the offset `d` along `g` as the stations share it — one station's own
+/// jump (a monument, its red noise) does not count.
+fn shared_offset(g: &[f64], d: &[f64], ns: usize) -> f64 {
+    let gg: f64 = g.iter().map(|v| v * v).sum();
+    if gg < latent::DECLARED_NORM2 || ns == 0 {
+        return 0.0;
+    }
+    let mut per_station = vec![0.0; ns];
+    for (c, (a, b)) in g.iter().zip(d).enumerate() {
+        per_station[c % ns] += a * b;
+    }
+    let total: f64 = per_station.iter().sum();
+    (total * total - per_station.iter().map(|v| v * v).sum::<f64>()) / gg
+}
+
+/// The held-out gain of a change of the source's volume at row `e` that stays: each station's
+/// residuals predicted by `g · â · (H(t ≥ e) − share of rows from e on)`, with `â` the amplitude
+/// of `g` in a least-squares fit of `g` and the `nuisance` patterns (network translations)
+/// together to the other stations' differences of mean after and before `e`; summed over the
+/// stations as `(Σ r·p)² / Σ p²` (0 if negative), like [`latent::loso_ab`].
+pub fn lasting_gain(
+    g: &[f64],
+    nuisance: &[Vec<f64>],
+    r: &[f64],
+    nc: usize,
+    ns: usize,
+    e: usize,
+) -> f64 {
+    let t_n = r.len() / nc.max(1);
+    if e == 0 || e >= t_n || ns < 2 {
+        return 0.0;
+    }
+    let (mut after, mut total) = (vec![0.0; nc], vec![0.0; nc]);
+    for (t, row) in r.chunks(nc).enumerate() {
+        for c in 0..nc {
+            total[c] += row[c];
+            if t >= e {
+                after[c] += row[c];
+            }
+        }
+    }
+    let (n_after, n_before) = ((t_n - e) as f64, e as f64);
+    let frac = n_after / t_n as f64;
+    // Per channel Σ_t r·(H − frac), and the mean after less the mean before.
+    let rh: Vec<f64> = (0..nc).map(|c| after[c] - frac * total[c]).collect();
+    let d: Vec<f64> = (0..nc)
+        .map(|c| after[c] / n_after - (total[c] - after[c]) / n_before)
+        .collect();
+    let hh = t_n as f64 * frac * (1.0 - frac);
+    let cols: Vec<&[f64]> = std::iter::once(g)
+        .chain(nuisance.iter().map(|v| v.as_slice()))
+        .collect();
+    let k = cols.len();
+    let (mut a, mut b) = (0.0, 0.0);
+    for i in 0..ns {
+        let mut m = DMatrix::<f64>::zeros(k, k);
+        let mut v = DVector::<f64>::zeros(k);
+        for c in (0..nc).filter(|c| c % ns != i) {
+            for p in 0..k {
+                v[p] += cols[p][c] * d[c];
+                for q in 0..k {
+                    m[(p, q)] += cols[p][c] * cols[q][c];
+                }
+            }
+        }
+        let Some(x) = m.lu().solve(&v) else { continue };
+        let amp = x[0];
+        if !amp.is_finite() {
+            continue;
+        }
+        for c in (i..nc).step_by(ns) {
+            a += amp * g[c] * rh[c];
+            b += amp * amp * g[c] * g[c] * hh;
+        }
+    }
+    weighted_gain((a, b))
+}
+
+/// The candidates ([`offsets`], [`shared_offset`]: the best few distinct grid points, each
+/// refined at its epoch), the one with the largest [`lasting_gain`] kept.
+fn search(res: &GnssResiduals) -> LastingFit {
+    let (ns, nc) = (res.ns(), res.nc());
+    let d = offsets(&res.fit.r, nc);
+    let SourceGrid {
+        points: pts,
+        patterns,
+        ..
+    } = grid(res);
+    let mut best = LastingFit::default();
+    if d.is_empty() {
+        return best;
+    }
+    let scored: Vec<(f64, usize)> = patterns
+        .par_iter()
+        .map(|g| {
+            d.iter()
+                .enumerate()
+                .map(|(k, (_, de))| (shared_offset(g, de, ns), k))
+                .fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
+        })
+        .collect();
+    let candidates = scored.iter().enumerate().map(|(pi, s)| (s.0, pi)).collect();
+    let ts = translations(res);
+    for (v, pi) in distinct_best(candidates, pts, CANDIDATES) {
+        let (onset, de) = &d[scored[pi].1];
+        let pos = refine(res, pts, pts[pi], v, &|g| shared_offset(g, de, ns)).0;
+        let gain = lasting_gain(&pattern(res, pos), &ts, &res.fit.r, nc, ns, *onset);
+        if gain > best.score {
+            best = LastingFit {
+                pos,
+                onset: *onset,
+                score: gain,
+            };
+        }
+    }
+    best.score /= res.ctx.total_fit.max(1e-300);
+    best
+}
+
+impl Family<GnssResiduals> for LastingSource {
+    type Fit = LastingFit;
+
+    fn name(&self) -> &'static str {
+        "lasting_source"
+    }
+    fn fit(&self, res: &GnssResiduals) -> Result<LastingFit> {
+        Ok(search(res))
+    }
+    fn score(&self, fit: &LastingFit) -> f64 {
+        fit.score
+    }
+    fn surrogate(
+        &self,
+        res: &GnssResiduals,
+        fit: &LastingFit,
+        rng: &mut StdRng,
+    ) -> Result<GnssResiduals> {
+        Ok(latent::surrogate(
+            res,
+            &with_translations(res, fit.pos),
+            rng,
+        ))
+    }
+    /// Position; onset (the scanned epoch) and end of the change (the first day on which the
+    /// daily volume change, 30-day running mean, has gone 90 % of the way from its mean before
+    /// the onset to its mean after); and the change of volume beyond what moving the main
+    /// source mimics (`peak_dv_1e6m3`: the projected pattern's daily amplitude, mean after less
+    /// mean before, 10⁶ m³).
+    fn params(&self, res: &GnssResiduals, fit: &LastingFit) -> serde_json::Value {
+        let g = pattern(res, fit.pos);
+        let dv = latent::daily_amplitude(&res.fit.r, res.nc(), &g);
+        let (n, e) = (dv.len(), fit.onset.min(dv.len()));
+        let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len().max(1) as f64;
+        let (before, after) = (mean(&dv[..e]), mean(&dv[e..]));
+        let smooth = |t: usize| mean(&dv[t.saturating_sub(15)..(t + 16).min(n)]);
+        let done = (e..n)
+            .find(|&t| (smooth(t) - before) / (after - before) >= 0.9)
+            .unwrap_or(e);
+        let date = |i: usize| {
+            res.fit
+                .days
+                .get(i)
+                .map_or(String::new(), |d| super::iso_date(*d))
+        };
+        json!({
+            "x_km": round3(fit.pos[0]), "y_km": round3(fit.pos[1]), "depth_km": round3(fit.pos[2]),
+            "start": date(e), "end": date(done),
+            "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
+        })
+    }
+    fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<String> {
+        on_bound(res, fit.pos)
+    }
+    fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
+        vec![
+            ("x_km", fit.pos[0]),
+            ("y_km", fit.pos[1]),
+            ("depth_km", fit.pos[2]),
+        ]
+    }
+    /// The fitted source and translations kept, the rest phase-randomised with phases shared by
+    /// every channel ([`latent::resample_coherent`]).
+    fn resample(
+        &self,
+        res: &GnssResiduals,
+        fit: &LastingFit,
+        rng: &mut StdRng,
+    ) -> Option<Result<GnssResiduals>> {
+        Some(Ok(latent::resample_coherent(
+            res,
+            &with_translations(res, fit.pos),
+            rng,
+        )))
+    }
+    fn declare(&self, _: &GnssResiduals, fit: &LastingFit) -> Option<OwnedEffect> {
+        (fit.score > 0.0).then_some(OwnedEffect::SecondSource {
+            x_km: fit.pos[0] as f32,
+            y_km: fit.pos[1] as f32,
+            depth_km: fit.pos[2] as f32,
+        })
+    }
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn offsets_measure_a_step_at_a_scanned_epoch() {
+        // Two channels over 1 000 days: a step of 2 at day 390 (a scanned epoch: 180 + 7 · 30),
+        // and a constant.
+        let nc = 2;
+        let r: Vec<f64> = (0..1000)
+            .flat_map(|t| [if t >= 390 { 2.0 } else { 0.0 }, 5.0])
+            .collect();
+        let d = offsets(&r, nc);
+        assert_eq!(d.len(), (1000 - 2 * SCAN_DAYS) / SCAN_SPACING + 1);
+        assert_eq!(d[7].0, 390);
+        assert!((d[7].1[0] - 2.0).abs() < 1e-12 && d[7].1[1].abs() < 1e-12);
+        for (t, de) in &d {
+            assert!(de[0] <= 2.0 + 1e-12, "epoch {t}");
+            assert!(de[1].abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn shared_offsets_ignore_one_stations_own_jump() {
+        // Three stations, two components (channel c of station c % 3).
+        let ns = 3;
+        let one_station = [1.0, 0.0, 0.0, 0.5, 0.0, 0.0];
+        assert_eq!(shared_offset(&one_station, &one_station, ns), 0.0);
+        let g = [1.0, 2.0, 0.0, 0.0, 0.0, 1.0];
+        // Per station gᵀd: 1, 4, 1 → (1 + 4 + 1)² − (1 + 16 + 1) = 18, over gᵀg = 6.
+        assert!((shared_offset(&g, &g, ns) - 3.0).abs() < 1e-12);
+    }
+
+    /// [`lasting_gain`] written out: per held-out station, the amplitude fitted directly on the
+    /// other stations' mean differences, the prediction formed row by row.
+    fn lasting_gain_directly(
+        g: &[f64],
+        nuisance: &[Vec<f64>],
+        r: &[f64],
+        nc: usize,
+        ns: usize,
+        e: usize,
+    ) -> f64 {
+        let t_n = r.len() / nc;
+        let mean = |c: usize, a: usize, b: usize| {
+            (a..b).map(|t| r[t * nc + c]).sum::<f64>() / (b - a) as f64
+        };
+        let d: Vec<f64> = (0..nc).map(|c| mean(c, e, t_n) - mean(c, 0, e)).collect();
+        let frac = (t_n - e) as f64 / t_n as f64;
+        let (mut a, mut b) = (0.0, 0.0);
+        for i in 0..ns {
+            let others: Vec<usize> = (0..nc).filter(|c| c % ns != i).collect();
+            let cols: Vec<&[f64]> = std::iter::once(g)
+                .chain(nuisance.iter().map(|v| v.as_slice()))
+                .collect();
+            let x = DMatrix::from_fn(others.len(), cols.len(), |row, k| cols[k][others[row]]);
+            let y = DVector::from_iterator(others.len(), others.iter().map(|&c| d[c]));
+            let amp = (x.transpose() * &x)
+                .lu()
+                .solve(&(x.transpose() * y))
+                .unwrap()[0];
+            for t in 0..t_n {
+                let h = if t >= e { 1.0 } else { 0.0 } - frac;
+                for c in (0..nc).filter(|c| c % ns == i) {
+                    let p = amp * g[c] * h;
+                    a += r[t * nc + c] * p;
+                    b += p * p;
+                }
+            }
+        }
+        weighted_gain((a, b))
+    }
+
+    #[test]
+    fn lasting_gain_matches_a_direct_computation_and_finds_a_shared_change() {
+        // Four stations, two components, 600 days: a change along g from row 250 on, noise,
+        // and a translation-like nuisance.
+        let (ns, nc, t_n, e) = (4usize, 8usize, 600usize, 250usize);
+        let g: Vec<f64> = (0..nc).map(|c| 1.0 + 0.3 * c as f64).collect();
+        let nuisance = vec![(0..nc).map(|c| if c < ns { 1.0 } else { 0.0 }).collect()];
+        let mut rng = StdRng::seed_from_u64(3);
+        let noise: Vec<f64> = (0..t_n * nc).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let with_change: Vec<f64> = (0..t_n * nc)
+            .map(|i| noise[i] + if i / nc >= e { 0.8 * g[i % nc] } else { 0.0 })
+            .collect();
+        for r in [&noise, &with_change] {
+            let got = lasting_gain(&g, &nuisance, r, nc, ns, e);
+            let want = lasting_gain_directly(&g, &nuisance, r, nc, ns, e);
+            assert!(
+                (got - want).abs() <= 1e-9 * want.max(1.0),
+                "{got} vs {want}"
+            );
+        }
+        let (on_noise, on_change) = (
+            lasting_gain(&g, &nuisance, &noise, nc, ns, e),
+            lasting_gain(&g, &nuisance, &with_change, nc, ns, e),
+        );
+        assert!(
+            on_change > 20.0 * on_noise.max(1.0),
+            "{on_change} vs {on_noise}"
+        );
+    }
+}
