@@ -33,8 +33,7 @@ use serde_json::json;
 
 /// Candidates refined in the search.
 const CANDIDATES: usize = 3;
-/// Days on each side of an epoch whose mean difference is the network's offset there
-/// ([`offsets`]).
+/// Days on each side of an epoch whose mean difference is the network's offset there.
 pub const SCAN_DAYS: usize = 180;
 /// Days between the scanned epochs.
 pub const SCAN_SPACING: usize = 30;
@@ -168,9 +167,9 @@ fn search(res: &GnssResiduals) -> LastingFit {
         patterns,
         ..
     } = grid(res);
-    let mut best = LastingFit::default();
+    let mut best: Option<LastingFit> = None;
     if d.is_empty() {
-        return best;
+        return LastingFit::default();
     }
     let scored: Vec<(f64, usize)> = patterns
         .par_iter()
@@ -187,14 +186,16 @@ fn search(res: &GnssResiduals) -> LastingFit {
         let (onset, de) = &d[scored[pi].1];
         let pos = refine(res, pts, pts[pi], v, &|g| shared_offset(g, de, ns)).0;
         let gain = lasting_gain(&pattern(res, pos), &ts, &res.fit.r, nc, ns, *onset);
-        if gain > best.score {
-            best = LastingFit {
+        // (The first candidate stands even without a gain: its position is still reported.)
+        if best.is_none_or(|b| gain > b.score) {
+            best = Some(LastingFit {
                 pos,
                 onset: *onset,
                 score: gain,
-            };
+            });
         }
     }
+    let mut best = best.unwrap_or_default();
     best.score /= res.ctx.total_fit.max(1e-300);
     best
 }
