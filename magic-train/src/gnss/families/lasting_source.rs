@@ -18,7 +18,8 @@
 
 use super::latent::{self, round3};
 use super::second_source::{
-    distinct_best, grid, on_bound, pattern, refine, translations, with_translations,
+    declare_at, distinct_best, grid, on_bound, pattern, position_params, refine, resample_at,
+    translations, with_translations,
 };
 use crate::analysis::score::weighted_gain;
 use crate::analysis::Family;
@@ -255,34 +256,21 @@ impl Family<GnssResiduals> for LastingSource {
         on_bound(res, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
-        vec![
-            ("x_km", fit.pos[0]),
-            ("y_km", fit.pos[1]),
-            ("depth_km", fit.pos[2]),
-        ]
+        position_params(fit.pos)
     }
-    /// The fitted source and translations kept, the rest phase-randomised with phases shared by
-    /// every channel ([`latent::resample_coherent`]).
     fn resample(
         &self,
         res: &GnssResiduals,
         fit: &LastingFit,
         rng: &mut StdRng,
     ) -> Option<Result<GnssResiduals>> {
-        Some(Ok(latent::resample_coherent(
-            res,
-            &with_translations(res, fit.pos),
-            rng,
-        )))
+        Some(Ok(resample_at(res, fit.pos, rng)))
     }
     fn declare(&self, _: &GnssResiduals, fit: &LastingFit) -> Option<OwnedEffect> {
-        (fit.score > 0.0).then_some(OwnedEffect::SecondSource {
-            x_km: fit.pos[0] as f32,
-            y_km: fit.pos[1] as f32,
-            depth_km: fit.pos[2] as f32,
-        })
+        declare_at(fit.pos, fit.score)
     }
 }
+
 #[cfg(test)]
 mod tests {
     use super::*;

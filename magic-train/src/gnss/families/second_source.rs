@@ -297,6 +297,26 @@ pub(super) fn on_bound(res: &GnssResiduals, pos: [f64; 3]) -> Option<String> {
         })
 }
 
+/// A source's key parameters (what the bootstrap measures): its position.
+pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
+    vec![("x_km", pos[0]), ("y_km", pos[1]), ("depth_km", pos[2])]
+}
+
+/// The bootstrap draw of a source at `pos`: the source and the translations kept, the rest
+/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]).
+pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
+    latent::resample_coherent(res, &with_translations(res, pos), rng)
+}
+
+/// The effect that adds a source at `pos` to F, if it explains anything (`score > 0`).
+pub(super) fn declare_at(pos: [f64; 3], score: f64) -> Option<OwnedEffect> {
+    (score > 0.0).then_some(OwnedEffect::SecondSource {
+        x_km: pos[0] as f32,
+        y_km: pos[1] as f32,
+        depth_km: pos[2] as f32,
+    })
+}
+
 impl Family<GnssResiduals> for SecondSource {
     type Fit = SourceFit;
 
@@ -375,31 +395,17 @@ impl Family<GnssResiduals> for SecondSource {
         on_bound(res, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
-        vec![
-            ("x_km", fit.pos[0]),
-            ("y_km", fit.pos[1]),
-            ("depth_km", fit.pos[2]),
-        ]
+        position_params(fit.pos)
     }
-    /// The fitted source and translations kept, the rest phase-randomised with phases shared by
-    /// every channel ([`latent::resample_coherent`]).
     fn resample(
         &self,
         res: &GnssResiduals,
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Option<Result<GnssResiduals>> {
-        Some(Ok(latent::resample_coherent(
-            res,
-            &with_translations(res, fit.pos),
-            rng,
-        )))
+        Some(Ok(resample_at(res, fit.pos, rng)))
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {
-        (fit.score > 0.0).then_some(OwnedEffect::SecondSource {
-            x_km: fit.pos[0] as f32,
-            y_km: fit.pos[1] as f32,
-            depth_km: fit.pos[2] as f32,
-        })
+        declare_at(fit.pos, fit.score)
     }
 }
