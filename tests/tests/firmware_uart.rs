@@ -10,72 +10,26 @@
 //! * a system reset (`!reset`, SYSRESETREQ) keeps the last model switched to, whichever slot it
 //!   is in, and failed or half-done uploads do not change it; a hung board is reset by the
 //!   watchdog, and the station sends the days that were in flight again;
-//! * the deployable ELF holds no semihosting trap (`bkpt 0xab`) and no panic is reachable in it;
-//! * `magic station` (the CLI path) writes one row per input row;
-//! * the deployable firmware built with the feature `sd` answers with the variables' standard
-//!   deviations, as `magic invert --sd` writes them.
+//! * the deployable ELF holds no semihosting trap (`bkpt 0xab`) and no panic is reachable in it.
+//!
+//! `magic station`'s CLI path and the build with standard deviations: `firmware_station.rs`.
 //!
 //! Needs `qemu-system-arm`, the Rust target `thumbv7em-none-eabihf` and `llvm-tools`; without
 //! them the tests fail with a message saying how to install them, unless `MAGIC_SKIP_QEMU=1`.
 
-use magic_core::{Flags, Model, Variant};
+mod uart_common;
+
+use magic_core::Model;
 use magic_train::data::records::{self, ObsRow};
-use magic_train::firmware::qemu::{build_firmware, ensure_toolchain, run_firmware};
+use magic_train::firmware::qemu::{build_firmware, run_firmware};
 use magic_train::firmware::qemu_uart::{build_deployable, semihosting_calls, UartQemu};
-use magic_train::firmware::station::{
-    self, Answer, BoardStatus, Event, Item, Link, Station, Transcript,
-};
-use magic_train::gnss::synth;
+use magic_train::firmware::station::{self, Answer, BoardStatus, Event, Item, Station, Transcript};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
+use uart_common::{agrees, connect, days, model, temp_dir, toolchain_ready, DAYS};
 
 /// Seconds a semihosting run may take.
 const TIMEOUT_S: u64 = 300;
-/// Board (f32) against host (f64): largest difference of a variable as a fraction of its
-/// range. Measured on these models: below 1e-5 (printed by the stream test); 1e-4 is the
-/// margin the semihosting test (firmware_qemu.rs) holds the board to as well.
-const HOST_TOLERANCE: f64 = 1e-4;
-/// The board's standard deviations (f64 in software from its f32 inversion) against the host's,
-/// relative: the bound of the measuring firmware's test (firmware_qemu.rs, measured 2.5e-6 there).
-const BOARD_SD_MAX_REL_ERROR: f64 = 2.5e-5;
-/// Days in the stream.
-const DAYS: usize = 10_000;
-
-fn toolchain_ready() -> bool {
-    match ensure_toolchain() {
-        Ok(()) => true,
-        Err(e) if std::env::var("MAGIC_SKIP_QEMU").as_deref() == Ok("1") => {
-            eprintln!("notice: skipping the firmware test (MAGIC_SKIP_QEMU=1): {e}");
-            false
-        }
-        Err(e) => panic!("{e:#}\n(set MAGIC_SKIP_QEMU=1 to skip the QEMU tests)"),
-    }
-}
-
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("magic-uart-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// An int8 variant-C model on the Akutan network (random weights, standardisation and
-/// calibration from the synthetic dataset of `seed`), as model-file bytes.
-fn model(seed: u64) -> Vec<u8> {
-    let owned = magic_tests::random_mogi_model(Variant::C, seed);
-    let s = synth::generate(synth::Scenario::Clean, seed);
-    let calib: Vec<Vec<f32>> = s
-        .problem
-        .data
-        .train
-        .x
-        .iter()
-        .filter(|r| r.iter().all(|v| v.is_finite()))
-        .take(256)
-        .cloned()
-        .collect();
-    owned.quantize_int8(&calib).unwrap().encode().unwrap()
-}
 
 /// The model with its format version set to `v`, CRC made valid again.
 fn with_version(bytes: &[u8], v: u16) -> Vec<u8> {
@@ -85,44 +39,6 @@ fn with_version(bytes: &[u8], v: u16) -> Vec<u8> {
     let crc = magic_tests::crc32(&b[..n - 4]);
     b[n - 4..].copy_from_slice(&crc.to_le_bytes());
     b
-}
-
-/// `DAYS` observation rows in mm (the synthetic dataset's days, cycled, at 0.1 mm: finer than GNSS
-/// daily noise of about 1 mm, and short lines for the slow emulated UART), written as a
-/// CSV with the network's columns and read back as `magic invert` reads it.
-fn days(model: &Model<'_>, name: &str) -> (PathBuf, Vec<ObsRow>) {
-    let s = synth::generate(synth::Scenario::Clean, 1);
-    let d = &s.problem.data;
-    let all: Vec<&Vec<f32>> = d
-        .train
-        .x
-        .iter()
-        .chain(&d.valid.x)
-        .chain(&d.test.x)
-        .collect();
-    let mut text = d.columns.join(",");
-    text.push('\n');
-    for i in 0..DAYS {
-        let row = all[i % all.len()];
-        let cells: Vec<String> = row
-            .iter()
-            .enumerate()
-            .map(|(c, &z)| {
-                if z.is_nan() {
-                    String::new()
-                } else {
-                    format!("{:.1}", z as f64 * d.scale[c] + d.mean[c])
-                }
-            })
-            .collect();
-        text.push_str(&cells.join(","));
-        text.push('\n');
-    }
-    let path = temp_dir().join(name);
-    std::fs::write(&path, text).unwrap();
-    let rows = records::read_obs(&path, model, false).unwrap();
-    assert_eq!(rows.len(), DAYS);
-    (path, rows)
 }
 
 /// Lines that reach the board and are refused by it (as by `magic_core::line::parse_obs`).
@@ -166,42 +82,6 @@ fn host_line(model: &Model<'_>, line: &str) -> String {
         },
     }
     s
-}
-
-/// Checks a board result against the host's: same error text, or every variable within
-/// [`HOST_TOLERANCE`] of its range with the same flags (but the residual threshold's) and
-/// stations. Returns the largest difference.
-fn agrees(model: &Model<'_>, board: &str, host: &str, what: &str) -> f64 {
-    if host.starts_with("error,") || board.starts_with("error,") {
-        assert_eq!(board, host, "{what}");
-        return 0.0;
-    }
-    let b: Vec<&str> = board.split(',').collect();
-    let h: Vec<&str> = host.split(',').collect();
-    let n = model.n_params();
-    assert_eq!(b.len(), h.len(), "{what}: {board} vs {host}");
-    let mut worst = 0f64;
-    for j in 0..n {
-        let (x, y): (f64, f64) = (b[j].parse().unwrap(), h[j].parse().unwrap());
-        let [lo, hi] = model.bounds[j];
-        let rel = (x - y).abs() / (hi - lo) as f64;
-        assert!(
-            rel <= HOST_TOLERANCE,
-            "{what}: variable {j}: board {x}, host {y}"
-        );
-        worst = worst.max(rel);
-    }
-    let flags = |v: &str| v.parse::<u8>().unwrap() & !Flags::HIGH_RESIDUAL;
-    assert_eq!(flags(b[n + 1]), flags(h[n + 1]), "{what}: flags");
-    assert_eq!(b[n + 2], h[n + 2], "{what}: stations used");
-    worst
-}
-
-fn connect(qemu: &mut UartQemu) -> Station {
-    let stream = qemu
-        .connect(Duration::from_secs(20))
-        .expect("connecting to QEMU");
-    Station::connect(Link::tcp(stream, &qemu.address()).unwrap()).expect("board status")
 }
 
 fn lines_of(items: Vec<String>) -> Vec<Item> {
@@ -722,171 +602,4 @@ fn the_deployable_firmware_makes_no_semihosting_call_and_cannot_panic() {
         build_deployable(&["panic-never", "panic-canary"]).is_err(),
         "a deployable firmware with a reachable panic linked with the panic-never handler"
     );
-}
-
-#[test]
-fn station_command_writes_one_row_per_input_row() {
-    if !toolchain_ready() {
-        return;
-    }
-    let bytes = model(41);
-    let m = Model::decode(&bytes).unwrap();
-    let dir = temp_dir();
-    let model_path = dir.join("cli.magic");
-    std::fs::write(&model_path, &bytes).unwrap();
-    // 40 days, the sixth with a value that is not a number (file line 7, its fourth field).
-    let (full, _) = days(&m, "cli-all.csv");
-    let text = std::fs::read_to_string(full).unwrap();
-    let mut lines: Vec<String> = text.lines().take(41).map(String::from).collect();
-    let mut f: Vec<&str> = lines[6].split(',').collect();
-    f[3] = "x";
-    // The error names the character column where the field starts.
-    let column = f[..3].iter().map(|c| c.chars().count() + 1).sum::<usize>() + 1;
-    lines[6] = f.join(",");
-    let input = dir.join("cli.csv");
-    std::fs::write(&input, lines.join("\n") + "\n").unwrap();
-
-    let elf = build_deployable(&[]).expect("building the deployable firmware");
-    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
-    // (Once QEMU listens; the board starts with this first connection.)
-    drop(
-        qemu.connect(Duration::from_secs(20))
-            .expect("connecting to QEMU"),
-    );
-    let output = dir.join("cli-out.csv");
-    let mut opts = station::Options {
-        port: qemu.address(),
-        model: Some(model_path),
-        days: Some(input.clone()),
-        output: Some(output.clone()),
-        standardized: false,
-    };
-    let err = station::run_cli(&opts).expect_err("one row is bad");
-    assert!(err.to_string().contains("1 of 40 rows"), "{err}");
-    let out = station::read_output(&output).unwrap();
-    assert_eq!(out.len(), 40, "one row per input row");
-    let host = records::invert_rows(&m, &records::read_obs(&input, &m, false).unwrap());
-    for (i, ((id, result), h)) in out.iter().zip(&host).enumerate() {
-        if i == 5 {
-            assert_eq!(*id, None);
-            assert!(result.contains(&format!("cli.csv:7:{column}:")), "{result}");
-            continue;
-        }
-        assert_eq!(*id, station::model_id(&bytes), "row {i}");
-        agrees(&m, result, h, &format!("row {i}"));
-    }
-    // Again: the board runs the model already (no upload), the same rows come back.
-    opts.days = None;
-    station::run_cli(&opts).expect("status only");
-}
-
-/// The deployable firmware built with the feature `sd` (`uart,sd`, memory-uart-sd.x) says so in
-/// its status, and `magic station` writes the variables' standard deviations after `magic
-/// invert`'s columns, as `magic invert --sd` does, within [`BOARD_SD_MAX_REL_ERROR`] of the
-/// host's; the build links with the panic-never handler too.
-#[test]
-fn deployable_firmware_with_standard_deviations() {
-    if !toolchain_ready() {
-        return;
-    }
-    let bytes = model(43);
-    let m = Model::decode(&bytes).unwrap();
-    let dir = temp_dir();
-    let model_path = dir.join("sd.magic");
-    std::fs::write(&model_path, &bytes).unwrap();
-    let (full, _) = days(&m, "sd-all.csv");
-    let text = std::fs::read_to_string(full).unwrap();
-    let input = dir.join("sd.csv");
-    std::fs::write(
-        &input,
-        text.lines().take(31).collect::<Vec<_>>().join("\n") + "\n",
-    )
-    .unwrap();
-
-    let elf = build_deployable(&["sd"]).expect("building the deployable firmware with `sd`");
-    let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
-    assert!(connect(&mut qemu).status.sd, "the status says sd=yes");
-    let output = dir.join("sd-out.csv");
-    station::run_cli(&station::Options {
-        port: qemu.address(),
-        model: Some(model_path),
-        days: Some(input.clone()),
-        output: Some(output.clone()),
-        standardized: false,
-    })
-    .expect("30 good rows");
-    let header = std::fs::read_to_string(&output).unwrap();
-    let sd_names = records::sd_columns(&m);
-    assert!(
-        header
-            .lines()
-            .next()
-            .unwrap()
-            .ends_with(&sd_names.join(",")),
-        "{header}"
-    );
-    let out = station::read_output(&output).unwrap();
-    let host = records::invert_rows_sd(&m, &records::read_obs(&input, &m, false).unwrap()).unwrap();
-    assert_eq!(out.len(), 30, "one row per input row");
-    let (n, k) = (m.n_params(), sd_names.len());
-    let mut worst = 0f64;
-    for (i, ((id, board), h)) in out.iter().zip(&host).enumerate() {
-        assert_eq!(*id, station::model_id(&bytes), "row {i}");
-        agrees(&m, board, h, &format!("row {i}"));
-        let (b, h): (Vec<&str>, Vec<&str>) = (board.split(',').collect(), h.split(',').collect());
-        assert_eq!(b.len(), n + 3 + k, "row {i}: {board}");
-        for j in n + 3..n + 3 + k {
-            let (x, y): (f64, f64) = (b[j].parse().unwrap(), h[j].parse().unwrap());
-            assert_eq!(
-                x.is_finite(),
-                y.is_finite(),
-                "row {i} field {j}: {x} vs {y}"
-            );
-            if y.is_finite() {
-                let rel = (x - y).abs() / y.abs().max(1e-12);
-                assert!(
-                    rel <= BOARD_SD_MAX_REL_ERROR,
-                    "row {i} field {j}: board {x}, host {y}"
-                );
-                worst = worst.max(rel);
-            }
-        }
-    }
-    // The stack's high-water mark after the standard deviations, within the budget.
-    let st = connect(&mut qemu).status;
-    let field = |k: &str| -> usize {
-        let v = st.fields.iter().find(|f| f.0 == k).map(|f| f.1.as_str());
-        v.and_then(|v| v.parse().ok())
-            .unwrap_or_else(|| panic!("status field {k}: {:?}", st.fields))
-    };
-    let (stack, available) = (field("stack"), field("stack_available"));
-    assert!(stack < available, "stack {stack} of {available} bytes");
-    eprintln!(
-        "deployable firmware with `sd`: standard deviations within {worst:.2e} of the host's; flash {} bytes, statics {} bytes, stack {stack} of {available} bytes",
-        field("flash"),
-        field("statics")
-    );
-    drop(qemu);
-    build_deployable(&["sd", "panic-never"])
-        .expect("the deployable `sd` firmware must link with the panic-never handler");
-}
-
-#[test]
-fn magic_qemu_says_to_export_an_f32_model_before_building() {
-    let f32_model = magic_tests::random_mogi_model(Variant::C, 51)
-        .encode()
-        .unwrap();
-    let path = temp_dir().join("trained-f32.magic");
-    std::fs::write(&path, &f32_model).unwrap();
-    // What `magic qemu` and `magic demo` build with: refused before cargo runs.
-    let err = build_firmware(&path).expect_err("an f32 model does not fit the firmware");
-    let msg = format!("{err:#}");
-    assert!(
-        msg.contains("f32 model") && msg.contains("magic export"),
-        "{msg}"
-    );
-    assert!(f32_model.len() > magic_train::firmware::qemu::MODEL_ROOM);
-    // Its int8 export passes the check.
-    let int8 = model(51);
-    assert!(magic_train::firmware::qemu::check_int8(&path, &int8).is_ok());
 }
