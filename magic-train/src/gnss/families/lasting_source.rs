@@ -16,7 +16,7 @@
 //! nuisance there and are removed before the surrogates randomise each station's series, as for
 //! the second source.
 
-use super::latent::{self, round3};
+use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid, on_bound, pattern, position_params, refine, resample_at,
     translations, with_translations,
@@ -58,21 +58,12 @@ pub struct LastingFit {
 fn offsets(r: &[f64], nc: usize) -> Vec<(usize, Vec<f64>)> {
     let t_n = r.len() / nc.max(1);
     let w = SCAN_DAYS;
-    let mut pre = vec![0.0; (t_n + 1) * nc];
-    for t in 0..t_n {
-        for c in 0..nc {
-            pre[(t + 1) * nc + c] = pre[t * nc + c] + r[t * nc + c];
-        }
-    }
+    let pre = Prefix::new(r, nc);
     (w..(t_n + 1).saturating_sub(w))
         .step_by(SCAN_SPACING)
         .map(|t| {
             let d = (0..nc)
-                .map(|c| {
-                    let after = pre[(t + w) * nc + c] - pre[t * nc + c];
-                    let before = pre[t * nc + c] - pre[(t - w) * nc + c];
-                    (after - before) / w as f64
-                })
+                .map(|c| (pre.sum(c, t, t + w) - pre.sum(c, t - w, t)) / w as f64)
                 .collect();
             (t, d)
         })

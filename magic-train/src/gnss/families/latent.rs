@@ -43,14 +43,15 @@ pub struct LatentFit {
 
 /// Running sums of every channel over the rows (`sum[t * nc + c]`: rows before t), for window
 /// means in constant time.
-struct Prefix {
+pub(super) struct Prefix {
     nc: usize,
     t_n: usize,
     sum: Vec<f64>,
 }
 
 impl Prefix {
-    fn new(r: &[f64], nc: usize) -> Prefix {
+    /// The running sums of the rows `r` (`nc` channels).
+    pub(super) fn new(r: &[f64], nc: usize) -> Prefix {
         let t_n = r.len() / nc;
         let mut sum = vec![0.0; (t_n + 1) * nc];
         for t in 0..t_n {
@@ -62,7 +63,7 @@ impl Prefix {
     }
 
     /// Sum of channel c over rows `lo..hi`.
-    fn sum(&self, c: usize, lo: usize, hi: usize) -> f64 {
+    pub(super) fn sum(&self, c: usize, lo: usize, hi: usize) -> f64 {
         self.sum[hi * self.nc + c] - self.sum[lo * self.nc + c]
     }
 

@@ -2,7 +2,7 @@
 //! disturbed monument). Fitted: declared, the offset (mm, E N U) enters F from its epoch on.
 
 use super::dated::{self, Scored, TimeFit};
-use super::latent::round3;
+use super::latent::{round3, Prefix};
 use crate::analysis::projection::{deproject, projected_response};
 use crate::analysis::Family;
 use crate::gnss::residuals::Block;
@@ -53,14 +53,8 @@ pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepF
     let t_n = b.days.len();
     let w = STEP_SCAN_DAYS.min(t_n / 4).max(1);
     let nk = nc / ns;
-    let mut pre = vec![0.0; (t_n + 1) * nc];
-    for t in 0..t_n {
-        for c in 0..nc {
-            pre[(t + 1) * nc + c] = pre[t * nc + c] + b.r[t * nc + c];
-        }
-    }
-    let mean =
-        |c: usize, a: usize, z: usize| (pre[z * nc + c] - pre[a * nc + c]) / (z - a).max(1) as f64;
+    let pre = Prefix::new(&b.r, nc);
+    let mean = |c: usize, a: usize, z: usize| pre.sum(c, a, z) / (z - a).max(1) as f64;
     let best = (0..ns)
         .into_par_iter()
         .map(|i| {
