@@ -18,9 +18,9 @@ use rand::rngs::StdRng;
 /// Number of folds of the analysed split in the cross-validation.
 pub const FOLDS: usize = 5;
 
-/// Rows (days) per block of the cross-validation's folds: twice the step scan's window
-/// ([`super::step::STEP_SCAN_DAYS`]), so that a held-out block is as long as the windows the
-/// scan compares.
+/// Rows (days) per block of the cross-validation's folds: twice the step scan's margin
+/// ([`super::step::STEP_SCAN_DAYS`]), so that a held-out block can hold an epoch with the
+/// margin's days on both sides.
 pub const CV_BLOCK_DAYS: usize = 2 * super::step::STEP_SCAN_DAYS;
 
 /// A fitted dated family: its prediction of channel c on a day, as a deviation from the

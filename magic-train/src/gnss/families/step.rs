@@ -8,13 +8,14 @@ use crate::analysis::Family;
 use crate::gnss::residuals::Block;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
-use crate::numerics::median;
+use crate::numerics::Ar1White;
 use anyhow::Result;
 use rand::rngs::StdRng;
 use rayon::prelude::*;
 use serde_json::json;
 
-/// Half-width (days) of the windows compared by the step scan.
+/// The step scan's margin: no epoch within this many rows of either end of the analysed record
+/// (a step is told from the noise by days on both of its sides).
 pub const STEP_SCAN_DAYS: usize = 30;
 
 /// The step family.
@@ -45,10 +46,11 @@ impl TimeFit for StepFit {
     }
 }
 
-/// The step scan: for every station and epoch, the difference of the means of the
-/// [`STEP_SCAN_DAYS`] rows after and before, normalised per channel by its typical (median)
-/// value over epochs; the largest sum over the station's channels wins. The offset is then
-/// the least-squares one of a two-level fit (mean after the epoch minus mean before).
+/// The step scan: for every station and epoch, the sum over the station's channels of the
+/// squared GLS z statistic of a step in white + AR(1) noise, each channel's noise fitted to its
+/// own series ([`Ar1White`]); the largest wins (epochs at least [`STEP_SCAN_DAYS`] rows from
+/// either end). The offset is then the least-squares one of a two-level fit (mean after the
+/// epoch minus mean before).
 pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepFit {
     let t_n = b.days.len();
     let w = STEP_SCAN_DAYS.min(t_n / 4).max(1);
@@ -58,26 +60,18 @@ pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepF
     let best = (0..ns)
         .into_par_iter()
         .map(|i| {
-            let chans: Vec<usize> = (0..nk).map(|k| k * ns + i).collect();
-            let d: Vec<Vec<f64>> = chans
-                .iter()
-                .map(|&c| {
-                    (w..=t_n - w)
-                        .map(|e| mean(c, e, e + w) - mean(c, e - w, e))
-                        .collect()
-                })
-                .collect();
-            let norm: Vec<f64> = d
-                .iter()
-                .map(|v| {
-                    (median(&mut v.iter().map(|x| x * x).collect::<Vec<_>>()) / 0.4549).max(1e-30)
-                })
-                .collect();
-            let mut bi = (0usize, f64::MIN);
-            for j in 0..d[0].len() {
-                let s: f64 = (0..nk).map(|k| d[k][j] * d[k][j] / norm[k]).sum();
-                if s > bi.1 {
-                    bi = (j + w, s);
+            let mut s = vec![0.0; t_n];
+            for k in 0..nk {
+                let x: Vec<f64> = (0..t_n).map(|t| b.r[t * nc + k * ns + i]).collect();
+                let z = Ar1White::fit(&x, &b.days).step_z(&x, &b.days);
+                for (s, z) in s.iter_mut().zip(z) {
+                    *s += z * z;
+                }
+            }
+            let mut bi = (t_n / 2, f64::MIN);
+            for (e, &v) in s.iter().enumerate().take(t_n.saturating_sub(w) + 1).skip(w) {
+                if v > bi.1 {
+                    bi = (e, v);
                 }
             }
             (i, bi.0, bi.1)
@@ -125,7 +119,8 @@ impl Family<GnssResiduals> for Step {
         Ok(dated::surrogate(res, &fit.fit, rng))
     }
     /// Station, epoch, offset (mm, E N U) and the scan statistic.
-    /// The scan statistic: a step's local jump must stand out of the noise's.
+    /// The scan statistic: a step's jump, weighed as the noise says, must stand out of the
+    /// noise's.
     fn statistic(&self, fit: &Self::Fit) -> Option<f64> {
         Some(fit.fit.stat)
     }
