@@ -63,12 +63,18 @@ enum Link {
     },
 }
 
-/// Half-open index ranges of the runs of consecutive days (`days[t] − days[t−1] ≤ 1.5`).
+/// Whether a row on day `next` follows one on day `prev` with no day missing (the one rule for
+/// the autocovariance's runs and the filter's links).
+fn consecutive(prev: f64, next: f64) -> bool {
+    next - prev <= 1.5
+}
+
+/// Half-open index ranges of the runs of [`consecutive`] days.
 fn runs(days: &[f64]) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut a = 0;
     for t in 1..=days.len() {
-        if t == days.len() || days[t] - days[t - 1] > 1.5 {
+        if t == days.len() || !consecutive(days[t - 1], days[t]) {
             out.push((a, t));
             a = t;
         }
@@ -174,10 +180,10 @@ impl Ar1White {
                 if t == 0 {
                     return Link::First;
                 }
-                let gap = (days[t] - days[t - 1]).round().max(1.0);
-                if gap <= 1.0 {
+                if consecutive(days[t - 1], days[t]) {
                     return Link::Day;
                 }
+                let gap = (days[t] - days[t - 1]).round();
                 let p = self.phi.powf(gap);
                 let v = sa * (1.0 - p * p) + sw * (1.0 + p * p);
                 Link::Gap {
