@@ -3,10 +3,12 @@
 
 use super::args::{write_file, JsonOut};
 use crate::analysis::AnalysisOptions;
+use crate::analysis::Candidate;
 use crate::closed_loop::{self, LoopOptions};
 use crate::data::SplitName;
 use crate::gnss::data::write_dir;
 use crate::gnss::recovery::coverage::Coverage;
+use crate::gnss::recovery::looped::{loop_table, LoopRun};
 use crate::gnss::recovery::{check_one, recovery_table};
 use crate::gnss::synth::truth::injected;
 use crate::gnss::synth::{self, NoiseModel, Scenario, Spec};
@@ -14,6 +16,7 @@ use crate::problem::Problem;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// `magic synth`.
@@ -181,22 +184,26 @@ pub struct SynthLoopCmd {
     /// Scenarios, comma-separated (default: all).
     #[arg(long, value_enum, value_delimiter = ',')]
     scenarios: Vec<Scenario>,
-    /// Seed of the data and the training.
+    /// Seed of the data and the training (the first, with `--seeds`).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Noise model.
-    #[arg(long, value_enum, default_value = "paper")]
-    noise: NoiseModel,
-    /// The period in which events begin.
-    #[arg(long, value_enum, default_value = "train")]
-    placement: SplitName,
+    /// Number of seeds per scenario (seed, seed + 1, …): a line per run and a summary over
+    /// the seeds.
+    #[arg(long, default_value_t = 1)]
+    seeds: u64,
+    /// Noise models, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "paper")]
+    noise: Vec<NoiseModel>,
+    /// The periods in which events begin, comma-separated (scenarios without events run once).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "train")]
+    placement: Vec<SplitName>,
     /// Maximum epochs per training.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
-    /// Folder for each scenario's loop report.
+    /// Folder for each run's loop report (and the tables).
     #[arg(long, default_value = "out/synth-loop")]
     out: PathBuf,
 }
@@ -213,47 +220,74 @@ fn folder(spec: &Spec) -> String {
     name
 }
 
-/// Runs `magic synth-loop`: the loop on one synthetic dataset per scenario, with a table of the
-/// effects it added and the test MSE of B and C before and after.
+/// Runs `magic synth-loop`: the loop on one synthetic dataset per scenario and seed, with a
+/// line per run (the effects it added and kept, the test MSE of B and C before and after) and,
+/// over several seeds, a summary of what it recovered ([`looped::loop_table`]).
 pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
     let mut table = String::from(
-        "| injected | placement | noise | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|\n",
+        "| injected | placement | noise | seed | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|---|\n",
     );
-    for sc in scenarios(&a.scenarios) {
-        let spec = Spec::new(sc, a.seed).noise(a.noise).placed(a.placement);
-        let s = spec.generate();
-        let opts = LoopOptions {
-            seed: a.seed,
-            train: s.problem.recipe().with(a.epochs, true),
-            max_rounds: a.rounds,
-            baseline: false,
-            analysis: AnalysisOptions::default(),
-        };
-        let dir = a.out.join(folder(&spec));
-        eprintln!("scenario {} ({})", sc.name(), s.problem.data.source);
-        let r = closed_loop::run(&s.problem, &opts, &dir)?;
-        write_file(
-            &dir.join("truth.json"),
-            serde_json::to_string_pretty(&s.truth)?,
-        )?;
-        let (first, last) = (r.first(), r.last_kept());
-        let added = r.added();
-        table += &format!(
-            "| {} | {} | {} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
-            sc.name(),
-            spec.placement_label(),
-            a.noise.name(),
-            if added.is_empty() {
-                "none".to_string()
-            } else {
-                added.join(", ")
-            },
-            first.b.mse[2],
-            last.b.mse[2],
-            first.c.mse[2],
-            last.c.mse[2]
-        );
+    let mut runs = Vec::new();
+    for spec in specs(&scenarios(&a.scenarios), &a.noise, &a.placement, 0) {
+        for seed in a.seed..a.seed + a.seeds.max(1) {
+            let spec = Spec { seed, ..spec };
+            let s = spec.generate();
+            let opts = LoopOptions {
+                seed,
+                train: s.problem.recipe().with(a.epochs, true),
+                max_rounds: a.rounds,
+                baseline: false,
+                analysis: AnalysisOptions::default(),
+            };
+            let mut dir = a.out.join(folder(&spec));
+            if a.seeds > 1 {
+                dir = dir.join(format!("seed-{seed}"));
+            }
+            eprintln!(
+                "scenario {} ({})",
+                spec.scenario.name(),
+                s.problem.data.source
+            );
+            let r = closed_loop::run(&s.problem, &opts, &dir)?;
+            write_file(
+                &dir.join("truth.json"),
+                serde_json::to_string_pretty(&s.truth)?,
+            )?;
+            let (first, last) = (r.first(), r.last_kept());
+            let kept: Vec<Candidate> = r
+                .rounds
+                .iter()
+                .filter(|x| x.kept)
+                .filter_map(|x| x.added.clone())
+                .collect();
+            let run = LoopRun::new(
+                &s.truth,
+                &kept,
+                [first.b.mse[2], last.b.mse[2]],
+                [first.c.mse[2], last.c.mse[2]],
+            );
+            let _ = writeln!(
+                table,
+                "| {} | {} | {} | {seed} | {} | {:.4} → {:.4} | {:.4} → {:.4} |",
+                spec.scenario.name(),
+                spec.placement_label(),
+                spec.noise.name(),
+                if run.added.is_empty() {
+                    "none".to_string()
+                } else {
+                    run.added.join(", ")
+                },
+                run.b[0],
+                run.b[1],
+                run.c[0],
+                run.c[1]
+            );
+            runs.push(run);
+        }
     }
+    table +=
+        "\nOver the seeds: the kept additions against the truth, and the test MSE (mean ± sd):\n\n";
+    table += &loop_table(&runs);
     print!("{table}");
     std::fs::create_dir_all(&a.out)?;
     write_file(&a.out.join("table.md"), &table)

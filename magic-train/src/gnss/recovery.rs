@@ -431,6 +431,7 @@ pub fn recovery_table(rows: &[Recovery]) -> String {
 }
 
 pub mod coverage;
+pub mod looped;
 
 #[cfg(test)]
 mod tests;
