@@ -2,7 +2,7 @@
 //! disturbed monument). Fitted: declared, the offset (mm, E N U) enters F from its epoch on.
 
 use super::dated::{self, Scored, TimeFit};
-use super::latent::{round3, Prefix};
+use super::latent::round3;
 use crate::analysis::projection::{deproject, projected_response};
 use crate::analysis::Family;
 use crate::gnss::residuals::Block;
@@ -49,14 +49,14 @@ impl TimeFit for StepFit {
 /// The step scan: for every station and epoch, the sum over the station's channels of the
 /// squared GLS z statistic of a step in white + AR(1) noise, each channel's noise fitted to its
 /// own series ([`Ar1White`]); the largest wins (epochs at least [`STEP_SCAN_DAYS`] rows from
-/// either end). The offset is then the least-squares one of a two-level fit (mean after the
-/// epoch minus mean before).
+/// either end). The offset is the GLS jump at that epoch in each channel, fitted with its
+/// noise ([`Ar1White::step_jump`]): the difference of the means after and before it would add
+/// the slow noise's levels, which held-out blocks share with their neighbours, to real and
+/// surrogate steps alike.
 pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepFit {
     let t_n = b.days.len();
     let w = STEP_SCAN_DAYS.min(t_n / 4).max(1);
     let nk = nc / ns;
-    let pre = Prefix::new(&b.r, nc);
-    let mean = |c: usize, a: usize, z: usize| pre.sum(c, a, z) / (z - a).max(1) as f64;
     let best = (0..ns)
         .into_par_iter()
         .map(|i| {
@@ -82,7 +82,10 @@ pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepF
     let chans: Vec<usize> = (0..nk).map(|k| k * ns + station).collect();
     let d: Vec<f64> = chans
         .iter()
-        .map(|&c| mean(c, e, t_n) - mean(c, 0, e))
+        .map(|&c| {
+            let x: Vec<f64> = (0..t_n).map(|t| b.r[t * nc + c]).collect();
+            Ar1White::step_jump(&x, &b.days, e)
+        })
         .collect();
     let offset = deproject(tangent, &chans, &d);
     let response = projected_response(tangent, nc, &chans, &offset);

@@ -143,7 +143,7 @@ mod tests {
             json!({"rate_mm_per_yr": {"AV08": [1.0, 0.0, 0.0]}}),
         );
         let runs = vec![
-            LoopRun::new(&truth, &[step.clone()], [0.8, 0.7], [0.9, 0.85]),
+            LoopRun::new(&truth, std::slice::from_ref(&step), [0.8, 0.7], [0.9, 0.85]),
             LoopRun::new(&truth, &[step, drift], [0.8, 0.6], [0.9, 0.75]),
             LoopRun::new(&truth, &[wrong], [0.8, 0.8], [0.9, 0.9]),
         ];
