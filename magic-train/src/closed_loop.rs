@@ -162,13 +162,18 @@ impl LoopReport {
             .unwrap_or(&self.rounds[0])
     }
 
-    /// The effects the loop added and kept, as `family (explained vs chance)`.
-    pub fn added(&self) -> Vec<String> {
+    /// The candidates the loop added and kept, in order.
+    pub fn kept_additions(&self) -> Vec<Candidate> {
         self.rounds
             .iter()
             .filter(|r| r.kept)
-            .filter_map(|r| r.added.as_ref().map(Candidate::short))
+            .filter_map(|r| r.added.clone())
             .collect()
+    }
+
+    /// The effects the loop added and kept, as `family (explained vs chance)`.
+    pub fn added(&self) -> Vec<String> {
+        self.kept_additions().iter().map(Candidate::short).collect()
     }
 }
 

@@ -3,7 +3,6 @@
 
 use super::args::{write_file, JsonOut};
 use crate::analysis::AnalysisOptions;
-use crate::analysis::Candidate;
 use crate::closed_loop::{self, LoopOptions};
 use crate::data::SplitName;
 use crate::gnss::data::write_dir;
@@ -222,7 +221,7 @@ fn folder(spec: &Spec) -> String {
 
 /// Runs `magic synth-loop`: the loop on one synthetic dataset per scenario and seed, with a
 /// line per run (the effects it added and kept, the test MSE of B and C before and after) and,
-/// over several seeds, a summary of what it recovered ([`looped::loop_table`]).
+/// over several seeds, a summary of what it recovered ([`loop_table`]).
 pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
     let mut table = String::from(
         "| injected | placement | noise | seed | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|---|\n",
@@ -254,15 +253,9 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
                 serde_json::to_string_pretty(&s.truth)?,
             )?;
             let (first, last) = (r.first(), r.last_kept());
-            let kept: Vec<Candidate> = r
-                .rounds
-                .iter()
-                .filter(|x| x.kept)
-                .filter_map(|x| x.added.clone())
-                .collect();
             let run = LoopRun::new(
                 &s.truth,
-                &kept,
+                &r.kept_additions(),
                 [first.b.mse[2], last.b.mse[2]],
                 [first.c.mse[2], last.c.mse[2]],
             );

@@ -1,5 +1,5 @@
 //! The whole loop against the truth (`magic synth-loop`): which effects it added and kept, by
-//! the rules of [`recovery`](super::recovery) applied to the kept additions (an injected effect
+//! the rules of [`recovery`] applied to the kept additions (an injected effect
 //! counts when an effect of its kind was kept with its key parameters recovered; any other kept
 //! addition the noise does not hold is a false one), and the test MSE before and after, over
 //! seeds.
