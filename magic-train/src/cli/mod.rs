@@ -69,7 +69,8 @@ pub enum Cmd {
     Synth(synth::SynthCmd),
     /// Check the residual analysis on synthetic data against the injected truth.
     SynthCheck(synth::SynthCheckCmd),
-    /// The loop on synthetic data: one dataset per scenario, what it added, MSE before and after.
+    /// The loop on synthetic data: one dataset per scenario and seed, what it added and kept, MSE
+    /// before and after, and over the seeds what it recovered against the truth.
     SynthLoop(synth::SynthLoopCmd),
     /// Map the forest variables of a Sentinel-2 image (RTM model, variant B or C): GeoTIFF in,
     /// float32 GeoTIFF out with one band per column of `magic invert` (the variables,
