@@ -15,7 +15,6 @@ use crate::problem::Problem;
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
-use std::fmt::Write as _;
 use std::path::PathBuf;
 
 /// `magic synth`.
@@ -226,6 +225,8 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
     let mut table = String::from(
         "| injected | placement | noise | seed | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|---|\n",
     );
+    print!("{table}");
+    std::fs::create_dir_all(&a.out)?;
     let mut runs = Vec::new();
     for spec in specs(&scenarios(&a.scenarios), &a.noise, &a.placement, 0) {
         for seed in a.seed..a.seed + a.seeds.max(1) {
@@ -259,9 +260,8 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
                 [first.b.mse[2], last.b.mse[2]],
                 [first.c.mse[2], last.c.mse[2]],
             );
-            let _ = writeln!(
-                table,
-                "| {} | {} | {} | {seed} | {} | {:.4} → {:.4} | {:.4} → {:.4} |",
+            let line = format!(
+                "| {} | {} | {} | {seed} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
                 spec.scenario.name(),
                 spec.placement_label(),
                 spec.noise.name(),
@@ -275,14 +275,21 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
                 run.c[0],
                 run.c[1]
             );
+            // Each run's line as it comes, on the screen and in the file: a stopped run keeps
+            // what it did.
+            print!("{line}");
+            std::io::Write::flush(&mut std::io::stdout())?;
+            table += &line;
+            write_file(&a.out.join("table.md"), &table)?;
             runs.push(run);
         }
     }
-    table +=
-        "\nOver the seeds: the kept additions against the truth, and the test MSE (mean ± sd):\n\n";
-    table += &loop_table(&runs);
-    print!("{table}");
-    std::fs::create_dir_all(&a.out)?;
+    let summary = format!(
+        "\nOver the seeds: the kept additions against the truth, and the test MSE (mean ± sd):\n\n{}",
+        loop_table(&runs)
+    );
+    print!("{summary}");
+    table += &summary;
     write_file(&a.out.join("table.md"), &table)
 }
 
