@@ -76,12 +76,13 @@ fn scenarios(list: &[Scenario]) -> Vec<Scenario> {
     }
 }
 
-/// Every combination of scenario, noise model and placement, once per scenario without events.
+/// Every combination of scenario, noise model and placement (once per scenario without
+/// events), each with every seed in turn.
 fn specs(
     scenarios: &[Scenario],
     noises: &[NoiseModel],
     placements: &[SplitName],
-    seed: u64,
+    seeds: std::ops::Range<u64>,
 ) -> Vec<Spec> {
     let mut out = Vec::new();
     for &sc in scenarios {
@@ -92,7 +93,9 @@ fn specs(
                 &placements[..1]
             };
             for &pl in places {
-                out.push(Spec::new(sc, seed).noise(noise).placed(pl));
+                for seed in seeds.clone() {
+                    out.push(Spec::new(sc, seed).noise(noise).placed(pl));
+                }
             }
         }
     }
@@ -135,27 +138,29 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
     let (mut rows, mut out) = (Vec::new(), Vec::new());
     let mut coverage = Coverage::default();
     let start = std::time::Instant::now();
-    for spec in specs(&scenarios(&a.scenarios), &a.noise, &a.placement, 0) {
-        for seed in a.first_seed..a.first_seed + a.seeds {
-            let spec = Spec { seed, ..spec };
-            let t0 = std::time::Instant::now();
-            let (r, an) = check_one(&spec, &cfg, &opts)?;
-            let secs = t0.elapsed().as_secs_f64();
-            eprintln!(
-                "{:<22} {:<5} {:<5} seed {:>3}: top {:<14} {}  {}",
-                r.scenario,
-                r.placement,
-                r.noise,
-                seed,
-                r.top,
-                if r.ok() { "ok  " } else { "FAIL" },
-                r.detail()
-            );
-            let truth = spec.generate().truth;
-            coverage.add(&an, &injected(&truth), &r.noise);
-            out.push(json!({"recovery": r.to_json(), "seconds": secs, "analysis": an.to_json()}));
-            rows.push(r);
-        }
+    for spec in specs(
+        &scenarios(&a.scenarios),
+        &a.noise,
+        &a.placement,
+        a.first_seed..a.first_seed + a.seeds,
+    ) {
+        let t0 = std::time::Instant::now();
+        let (r, an) = check_one(&spec, &cfg, &opts)?;
+        let secs = t0.elapsed().as_secs_f64();
+        eprintln!(
+            "{:<22} {:<5} {:<5} seed {:>3}: top {:<14} {}  {}",
+            r.scenario,
+            r.placement,
+            r.noise,
+            spec.seed,
+            r.top,
+            if r.ok() { "ok  " } else { "FAIL" },
+            r.detail()
+        );
+        let truth = spec.generate().truth;
+        coverage.add(&an, &injected(&truth), &r.noise);
+        out.push(json!({"recovery": r.to_json(), "seconds": secs, "analysis": an.to_json()}));
+        rows.push(r);
     }
     let mut table = recovery_table(&rows);
     if !coverage.is_empty() {
@@ -228,61 +233,64 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
     print!("{table}");
     std::fs::create_dir_all(&a.out)?;
     let mut runs = Vec::new();
-    for spec in specs(&scenarios(&a.scenarios), &a.noise, &a.placement, 0) {
-        for seed in a.seed..a.seed + a.seeds.max(1) {
-            let spec = Spec { seed, ..spec };
-            let s = spec.generate();
-            let opts = LoopOptions {
-                seed,
-                train: s.problem.recipe().with(a.epochs, true),
-                max_rounds: a.rounds,
-                baseline: false,
-                analysis: AnalysisOptions::default(),
-            };
-            let mut dir = a.out.join(folder(&spec));
-            if a.seeds > 1 {
-                dir = dir.join(format!("seed-{seed}"));
-            }
-            eprintln!(
-                "scenario {} ({})",
-                spec.scenario.name(),
-                s.problem.data.source
-            );
-            let r = closed_loop::run(&s.problem, &opts, &dir)?;
-            write_file(
-                &dir.join("truth.json"),
-                serde_json::to_string_pretty(&s.truth)?,
-            )?;
-            let (first, last) = (r.first(), r.last_kept());
-            let run = LoopRun::new(
-                &s.truth,
-                &r.kept_additions(),
-                [first.b.mse[2], last.b.mse[2]],
-                [first.c.mse[2], last.c.mse[2]],
-            );
-            let line = format!(
-                "| {} | {} | {} | {seed} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
-                spec.scenario.name(),
-                spec.placement_label(),
-                spec.noise.name(),
-                if run.added.is_empty() {
-                    "none".to_string()
-                } else {
-                    run.added.join(", ")
-                },
-                run.b[0],
-                run.b[1],
-                run.c[0],
-                run.c[1]
-            );
-            // Each run's line as it comes, on the screen and in the file: a stopped run keeps
-            // what it did.
-            print!("{line}");
-            std::io::Write::flush(&mut std::io::stdout())?;
-            table += &line;
-            write_file(&a.out.join("table.md"), &table)?;
-            runs.push(run);
+    for spec in specs(
+        &scenarios(&a.scenarios),
+        &a.noise,
+        &a.placement,
+        a.seed..a.seed + a.seeds.max(1),
+    ) {
+        let seed = spec.seed;
+        let s = spec.generate();
+        let opts = LoopOptions {
+            seed,
+            train: s.problem.recipe().with(a.epochs, true),
+            max_rounds: a.rounds,
+            baseline: false,
+            analysis: AnalysisOptions::default(),
+        };
+        let mut dir = a.out.join(folder(&spec));
+        if a.seeds > 1 {
+            dir = dir.join(format!("seed-{seed}"));
         }
+        eprintln!(
+            "scenario {} ({})",
+            spec.scenario.name(),
+            s.problem.data.source
+        );
+        let r = closed_loop::run(&s.problem, &opts, &dir)?;
+        write_file(
+            &dir.join("truth.json"),
+            serde_json::to_string_pretty(&s.truth)?,
+        )?;
+        let (first, last) = (r.first(), r.last_kept());
+        let run = LoopRun::new(
+            &s.truth,
+            &r.kept_additions(),
+            [first.b.mse[2], last.b.mse[2]],
+            [first.c.mse[2], last.c.mse[2]],
+        );
+        let line = format!(
+            "| {} | {} | {} | {seed} | {} | {:.4} → {:.4} | {:.4} → {:.4} |\n",
+            spec.scenario.name(),
+            spec.placement_label(),
+            spec.noise.name(),
+            if run.added.is_empty() {
+                "none".to_string()
+            } else {
+                run.added.join(", ")
+            },
+            run.b[0],
+            run.b[1],
+            run.c[0],
+            run.c[1]
+        );
+        // Each run's line as it comes, on the screen and in the file: a stopped run keeps
+        // what it did.
+        print!("{line}");
+        std::io::Write::flush(&mut std::io::stdout())?;
+        table += &line;
+        write_file(&a.out.join("table.md"), &table)?;
+        runs.push(run);
     }
     let summary = format!(
         "\nOver the seeds: the kept additions against the truth, and the test MSE (mean ± sd):\n\n{}",
@@ -308,7 +316,7 @@ mod tests {
             ],
             &NoiseModel::ALL,
             &all,
-            1,
+            1..2,
         );
         assert_eq!(s.len(), 2 * (1 + 3 + 1));
         assert_eq!(s.iter().filter(|x| x.scenario == Scenario::Step).count(), 6);

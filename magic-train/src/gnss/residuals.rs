@@ -53,6 +53,11 @@ impl Block {
     pub fn len(&self, nc: usize) -> usize {
         self.r.len() / nc.max(1)
     }
+
+    /// Channel `c`'s series (one value per row) for `nc` channels.
+    pub fn channel(&self, c: usize, nc: usize) -> Vec<f64> {
+        self.r.iter().skip(c).step_by(nc.max(1)).copied().collect()
+    }
 }
 
 /// What every family shares about the residuals of one model: the network, the units, F's

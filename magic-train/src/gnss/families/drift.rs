@@ -93,10 +93,7 @@ fn ramp_beats_step(b: &Block, nc: usize, ns: usize, i: usize) -> bool {
         return false;
     }
     let chans: Vec<usize> = (0..nc / ns).map(|k| k * ns + i).collect();
-    let x: Vec<Vec<f64>> = chans
-        .iter()
-        .map(|&c| (0..t_n).map(|t| b.r[t * nc + c]).collect())
-        .collect();
+    let x: Vec<Vec<f64>> = chans.iter().map(|&c| b.channel(c, nc)).collect();
     // Straight line per channel (least squares in the day number).
     let tm = b.days.iter().sum::<f64>() / t_n as f64;
     let stt: f64 = b.days.iter().map(|d| (d - tm).powi(2)).sum();

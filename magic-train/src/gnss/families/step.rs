@@ -62,7 +62,7 @@ pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepF
         .map(|i| {
             let mut s = vec![0.0; t_n];
             for k in 0..nk {
-                let x: Vec<f64> = (0..t_n).map(|t| b.r[t * nc + k * ns + i]).collect();
+                let x = b.channel(k * ns + i, nc);
                 let z = Ar1White::fit(&x, &b.days).step_z(&x, &b.days);
                 for (s, z) in s.iter_mut().zip(z) {
                     *s += z * z;
@@ -83,7 +83,7 @@ pub fn fit_block(b: &Block, nc: usize, ns: usize, tangent: &[Vec<f64>]) -> StepF
     let d: Vec<f64> = chans
         .iter()
         .map(|&c| {
-            let x: Vec<f64> = (0..t_n).map(|t| b.r[t * nc + c]).collect();
+            let x = b.channel(c, nc);
             Ar1White::step_jump(&x, &b.days, e)
         })
         .collect();
