@@ -4,8 +4,7 @@
 //! cortex-m-semihosting writes to the host but has no reader, so the two calls needed here (`OPEN`
 //! of `:tt` for reading, `READ`) are made directly with its `syscall!`.
 
-use crate::line::{strip_cr, Line, LINE_MAX};
-use core::fmt;
+use crate::line::{self, Assembler, Line, Sink};
 use cortex_m_semihosting::{debug, hio};
 
 /// Ends the program: semihosting exit with success or failure (QEMU exits 0 or 1).
@@ -19,18 +18,6 @@ pub fn exit(ok: bool) -> ! {
     loop {
         cortex_m::asm::bkpt();
     }
-}
-
-/// Lines from the host's standard input.
-pub struct Stdin {
-    fd: Option<usize>,
-    chunk: [u8; 256],
-    pos: usize,
-    len: usize,
-    eof: bool,
-    line: [u8; LINE_MAX],
-    n: usize,
-    too_long: bool,
 }
 
 #[allow(unsafe_code)]
@@ -52,6 +39,16 @@ fn sys_read(fd: usize, buf: &mut [u8]) -> Option<usize> {
     (left <= buf.len()).then(|| buf.len() - left)
 }
 
+/// Lines from the host's standard input.
+pub struct Stdin {
+    fd: Option<usize>,
+    chunk: [u8; 256],
+    pos: usize,
+    len: usize,
+    eof: bool,
+    line: Assembler,
+}
+
 impl Stdin {
     /// Opens the host's standard input.
     pub fn open() -> Stdin {
@@ -61,16 +58,13 @@ impl Stdin {
             pos: 0,
             len: 0,
             eof: false,
-            line: [0; LINE_MAX],
-            n: 0,
-            too_long: false,
+            line: Assembler::new(),
         }
     }
 
     /// The next line, or `None` at the end of the input. A last line without a newline counts.
     pub fn next_line(&mut self) -> Option<Line<'_>> {
-        self.n = 0;
-        self.too_long = false;
+        self.line.clear();
         let mut any = false;
         loop {
             if self.pos == self.len {
@@ -92,17 +86,9 @@ impl Stdin {
             if b == b'\n' {
                 break;
             }
-            if let Some(slot) = self.line.get_mut(self.n) {
-                *slot = b;
-                self.n += 1;
-            } else {
-                self.too_long = true;
-            }
+            self.line.push(b);
         }
-        if self.too_long {
-            return Some(Line::TooLong);
-        }
-        Some(Line::Text(strip_cr(self.line.get(..self.n).unwrap_or(&[]))))
+        Some(self.line.line())
     }
 
     fn refill(&mut self) -> bool {
@@ -124,67 +110,23 @@ impl Stdin {
     }
 }
 
-/// A line being written to the host's standard output: formatted into a buffer, sent whole by
-/// [`Out::end_line`] (one semihosting call per line).
-pub struct Out {
-    stream: Option<hio::HostStream>,
-    buf: [u8; 512],
-    n: usize,
-}
+/// A line being written to the host's standard output (one semihosting call per line).
+pub type Out = line::Out<HostOut>;
 
-impl Out {
+/// The host's standard output as the sink of output lines.
+pub struct HostOut(Option<hio::HostStream>);
+
+impl Default for HostOut {
     /// Opens the host's standard output.
-    pub fn new() -> Out {
-        Out {
-            stream: hio::hstdout().ok(),
-            buf: [0; 512],
-            n: 0,
-        }
-    }
-
-    /// Ends the current line with `\n` and sends it.
-    #[inline(never)]
-    pub fn end_line(&mut self) {
-        // `n` stays below the buffer's length (`write_str` keeps a byte for the newline); the
-        // checked accesses cost nothing and keep the code free of panics.
-        if let Some(b) = self.buf.get_mut(self.n) {
-            *b = b'\n';
-            self.n += 1;
-        }
-        if let (Some(s), Some(line)) = (self.stream.as_mut(), self.buf.get(..self.n)) {
-            let _ = s.write_all(line);
-        }
-        self.n = 0;
+    fn default() -> HostOut {
+        HostOut(hio::hstdout().ok())
     }
 }
 
-impl fmt::Write for Out {
-    /// Appends to the line; text beyond the buffer is cut (result lines are far shorter).
-    #[inline(never)]
-    fn write_str(&mut self, s: &str) -> fmt::Result {
-        // Keep one byte for the newline.
-        let room = (self.buf.len() - 1).saturating_sub(self.n);
-        let k = s.len().min(room);
-        if let (Some(dst), Some(src)) =
-            (self.buf.get_mut(self.n..self.n + k), s.as_bytes().get(..k))
-        {
-            dst.copy_from_slice(src);
-            self.n += k;
+impl Sink for HostOut {
+    fn send(&mut self, bytes: &[u8]) {
+        if let Some(s) = self.0.as_mut() {
+            let _ = s.write_all(bytes);
         }
-        Ok(())
-    }
-}
-
-/// Core's error messages written piece by piece, numbers by [`crate::text`]: the same words as
-/// its `Display`, without `core::fmt`'s formatting code.
-impl magic_core::MessageSink for Out {
-    fn text(&mut self, s: &str) {
-        let _ = fmt::Write::write_str(self, s);
-    }
-    fn number(&mut self, n: u32) {
-        let _ = crate::text::write_u32(self, n);
-    }
-    fn hex(&mut self, n: u32) {
-        let _ = crate::text::write_hex32(self, n);
     }
 }
