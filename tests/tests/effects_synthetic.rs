@@ -26,7 +26,8 @@ fn check(scenario: Scenario) {
     };
     for seed in [1, 2] {
         let spec = Spec::new(scenario, seed);
-        let (r, a) = check_one(&spec, &cfg, &AnalysisOptions::default()).unwrap();
+        let check = check_one(&spec, &cfg, &AnalysisOptions::default()).unwrap();
+        let (r, a) = (check.recovery, check.analysis);
         assert!(
             r.ok(),
             "{} seed {seed}: {} ({:?})\n{}",
@@ -118,12 +119,13 @@ fn fitted_effect_reproduces_the_fit() {
         progress: false,
         ..TrainConfig::gnss()
     };
-    let (_, a) = check_one(
+    let a = check_one(
         &Spec::new(Scenario::Step, 1),
         &cfg,
         &AnalysisOptions::default(),
     )
-    .unwrap();
+    .unwrap()
+    .analysis;
     let step = a.effects.iter().find(|c| c.family == "step").unwrap();
     let Some(OwnedEffect::Step {
         station,

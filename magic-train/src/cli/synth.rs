@@ -145,7 +145,8 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
         a.first_seed..a.first_seed + a.seeds,
     ) {
         let t0 = std::time::Instant::now();
-        let (r, an) = check_one(&spec, &cfg, &opts)?;
+        let check = check_one(&spec, &cfg, &opts)?;
+        let (r, an) = (check.recovery, check.analysis);
         let secs = t0.elapsed().as_secs_f64();
         eprintln!(
             "{:<22} {:<5} {:<5} seed {:>3}: top {:<14} {}  {}",
@@ -157,8 +158,7 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
             if r.ok() { "ok  " } else { "FAIL" },
             r.detail()
         );
-        let truth = spec.generate().truth;
-        coverage.add(&an, &injected(&truth), &r.noise);
+        coverage.add(&an, &injected(&check.truth), &r.noise);
         out.push(json!({"recovery": r.to_json(), "seconds": secs, "analysis": an.to_json()}));
         rows.push(r);
     }

@@ -318,19 +318,29 @@ pub fn recovery(truth: &serde_json::Value, candidates: &[Candidate]) -> Recovery
     }
 }
 
+/// One dataset checked: what was injected, what the analysis found, and how they compare.
+pub struct Check {
+    /// The analysis against the truth.
+    pub recovery: Recovery,
+    /// The analysis of the trained model's residuals.
+    pub analysis: Analysis,
+    /// What was injected (`truth.json`).
+    pub truth: serde_json::Value,
+}
+
 /// Generates a dataset, trains a B model on it (seeded with the dataset's seed) and analyses
 /// its residuals.
-pub fn check_one(
-    spec: &Spec,
-    cfg: &TrainConfig,
-    opts: &AnalysisOptions,
-) -> Result<(Recovery, Analysis)> {
+pub fn check_one(spec: &Spec, cfg: &TrainConfig, opts: &AnalysisOptions) -> Result<Check> {
     let s = spec.generate();
     let (model, _) = train_model(&s.problem, ModelKind::B, &[], cfg, spec.seed)?;
     let bytes = model.encode()?;
     let m = Model::decode(&bytes)?;
-    let (a, _) = analyse(&s.problem, &m, opts)?;
-    Ok((recovery(&s.truth, &a.effects), a))
+    let (analysis, _) = analyse(&s.problem, &m, opts)?;
+    Ok(Check {
+        recovery: recovery(&s.truth, &analysis.effects),
+        analysis,
+        truth: s.truth,
+    })
 }
 
 /// `k/n`.
