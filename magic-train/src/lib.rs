@@ -39,7 +39,7 @@ pub mod reproduce;
 pub mod rtm;
 pub mod train;
 
-pub use analysis::{analyse, Analysis, AnalysisOptions, Candidate, DynFamily, Family};
+pub use analysis::{analyse, Analysis, AnalysisOptions, Candidate, DynFamily, Family, MainSource};
 pub use data::{Dataset, Split, SplitName};
 pub use eval::{evaluate, evaluate_splits, EvalResult};
 pub use gnss::{GnssProblem, MogiPhysics, Network};

@@ -24,6 +24,20 @@ use serde_json::json;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// How the volcano's analysis treats the main source (the forest's ignores it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum MainSource {
+    /// Free to move every day, as the encoder moves it: whatever its position, depth or volume
+    /// can produce is projected off the residuals. A second source within a few km of it is
+    /// then mostly a move of it, and is rarely found.
+    #[default]
+    Free,
+    /// Held in place, its volume changing: only its field's direction is projected off, so a
+    /// second source near it stays in the residuals. A main source that does move between its
+    /// episodes then shows as a second source beside it.
+    Held,
+}
+
 /// Options of [`analyse`], checked once by the problem's residuals.
 #[derive(Clone, Debug)]
 pub struct AnalysisOptions {
@@ -40,6 +54,8 @@ pub struct AnalysisOptions {
     pub seed: u64,
     /// Bootstrap draws for the uncertainty of a significant candidate's key parameters (0: none).
     pub bootstrap: usize,
+    /// The volcano's main source, free to move or held in place.
+    pub main_source: MainSource,
 }
 
 impl Default for AnalysisOptions {
@@ -50,6 +66,7 @@ impl Default for AnalysisOptions {
             quantile: 0.95,
             seed: 0,
             bootstrap: 20,
+            main_source: MainSource::Free,
         }
     }
 }

@@ -2,7 +2,7 @@
 //! to F, retrain, report.
 
 use super::args::{DataArgs, ProblemArg};
-use crate::analysis::AnalysisOptions;
+use crate::analysis::{AnalysisOptions, MainSource};
 use crate::closed_loop::{run as run_loop, LoopOptions};
 use crate::problem::Problem;
 use crate::rtm::GeometryArg;
@@ -27,6 +27,11 @@ pub struct LoopCmd {
     /// Surrogates per family in the residual analysis.
     #[arg(long, default_value_t = 20)]
     surrogates: usize,
+    /// The volcano's main source in the residual analysis: `free` to move every day (whatever
+    /// moving it produces is projected off) or `held` in place (only its field's direction is
+    /// projected off, so a second source near it stays visible).
+    #[arg(long, value_enum, default_value = "free")]
+    main_source: MainSource,
     /// Report folder (Markdown, JSON, PNG, the rounds' model files).
     #[arg(long, default_value = "out/loop")]
     report: PathBuf,
@@ -55,6 +60,7 @@ pub fn run(a: &LoopCmd) -> Result<()> {
             baseline: !a.no_classical,
             analysis: AnalysisOptions {
                 surrogates: a.surrogates,
+                main_source: a.main_source,
                 ..AnalysisOptions::default()
             },
         };

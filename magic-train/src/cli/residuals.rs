@@ -2,7 +2,7 @@
 //! by the share of residual variance they explain on held-out data beyond chance.
 
 use super::args::{decode, DataArgs, JsonOut, ModelArg};
-use crate::analysis::{analyse, AnalysisOptions};
+use crate::analysis::{analyse, AnalysisOptions, MainSource};
 use crate::data::SplitName;
 use crate::problem::Problem;
 use crate::with_problem;
@@ -31,6 +31,11 @@ pub struct ResidualsCmd {
     /// Seed of the surrogates.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// The volcano's main source in the residual analysis: `free` to move every day (whatever
+    /// moving it produces is projected off) or `held` in place (only its field's direction is
+    /// projected off, so a second source near it stays visible).
+    #[arg(long, value_enum, default_value = "free")]
+    main_source: MainSource,
     #[command(flatten)]
     json: JsonOut,
     /// Write the analysis' figures (PNG) into this folder.
@@ -47,6 +52,7 @@ pub fn run(a: &ResidualsCmd) -> Result<()> {
         bootstrap: a.bootstrap,
         surrogates: a.surrogates,
         seed: a.seed,
+        main_source: a.main_source,
         ..AnalysisOptions::default()
     };
     let p = a.data.problem_of(&m)?;

@@ -2,7 +2,7 @@
 //! effects, and how well the analysis and the loop recover them.
 
 use super::args::{write_file, JsonOut};
-use crate::analysis::AnalysisOptions;
+use crate::analysis::{AnalysisOptions, MainSource};
 use crate::closed_loop::{self, LoopOptions};
 use crate::data::SplitName;
 use crate::gnss::data::write_dir;
@@ -123,6 +123,11 @@ pub struct SynthCheckCmd {
     /// Training epochs of the B models.
     #[arg(long, default_value_t = 15)]
     epochs: usize,
+    /// The volcano's main source in the residual analysis: `free` to move every day (whatever
+    /// moving it produces is projected off) or `held` in place (only its field's direction is
+    /// projected off, so a second source near it stays visible).
+    #[arg(long, value_enum, default_value = "free")]
+    main_source: MainSource,
     /// Write the table (Markdown) here too.
     #[arg(long)]
     table: Option<PathBuf>,
@@ -134,7 +139,10 @@ pub struct SynthCheckCmd {
 /// data, train a B model briefly, analyse it and compare with the injected truth.
 pub fn check(a: &SynthCheckCmd) -> Result<()> {
     let cfg = crate::train::TrainConfig::gnss().with(a.epochs, true);
-    let opts = AnalysisOptions::default();
+    let opts = AnalysisOptions {
+        main_source: a.main_source,
+        ..AnalysisOptions::default()
+    };
     let (mut rows, mut out) = (Vec::new(), Vec::new());
     let mut coverage = Coverage::default();
     let start = std::time::Instant::now();
@@ -206,6 +214,11 @@ pub struct SynthLoopCmd {
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
+    /// The volcano's main source in the residual analysis: `free` to move every day (whatever
+    /// moving it produces is projected off) or `held` in place (only its field's direction is
+    /// projected off, so a second source near it stays visible).
+    #[arg(long, value_enum, default_value = "free")]
+    main_source: MainSource,
     /// Folder for each run's loop report (and the tables).
     #[arg(long, default_value = "out/synth-loop")]
     out: PathBuf,
@@ -246,7 +259,10 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
             train: s.problem.recipe().with(a.epochs, true),
             max_rounds: a.rounds,
             baseline: false,
-            analysis: AnalysisOptions::default(),
+            analysis: AnalysisOptions {
+                main_source: a.main_source,
+                ..AnalysisOptions::default()
+            },
         };
         let mut dir = a.out.join(folder(&spec));
         if a.seeds > 1 {

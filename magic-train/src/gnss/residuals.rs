@@ -3,23 +3,32 @@
 //! Every day of the data is inverted with the core's `invert_at` (the model as it will be used):
 //! the encoder's variables give the main source's typical position (the median over the days of
 //! largest volume change) and the physics-only error F(E(x)) is reported. The families are then
-//! fitted to what F, linearised around that typical state, cannot produce whatever its variables:
-//! each day's observation less F's time-dependent declared effects, in the data's standardised
-//! units (the paper's metric), projected off the span of F's Jacobian (the main source's position,
-//! depth and volume, and the declared latent effects), each channel's mean over the analysed split
-//! removed (a channel missing on a day takes the model's reconstruction, as the core fills it at
-//! inversion). For a C model the same holds: the correction absorbs bias, the question is what F
-//! lacks. Working off the linearisation rather than off `x − F(E(x))` keeps the analysis
-//! independent of how the encoder distorts its variables to mimic a missing effect (an encoder
-//! readily moves the main source towards a second one, or tilts it to follow a step at an edge
-//! station); candidate patterns are projected the same way.
+//! fitted to what F, linearised around that typical state, cannot produce: each day's
+//! observation less F's time-dependent declared effects, in the data's standardised units (the
+//! paper's metric), projected off the declared latent effects and off the main source, each
+//! channel's mean over the analysed split removed (a channel missing on a day takes the model's
+//! reconstruction, as the core fills it at inversion). For a C model the same holds: the
+//! correction absorbs bias, the question is what F lacks. Working off the linearisation rather
+//! than off `x − F(E(x))` keeps the analysis independent of how the encoder distorts its
+//! variables to mimic a missing effect (an encoder readily moves the main source towards a
+//! second one, or tilts it to follow a step at an edge station); candidate patterns are
+//! projected the same way.
+//!
+//! The main source is either free to move ([`MainSource::Free`], the default: the whole span of
+//! its Jacobian — position, depth, volume — is projected off) or held in place
+//! ([`MainSource::Held`]: only the one direction of that span along which the days vary most, a
+//! source whose volume changes where it is). Free, a second source 2–4 km from the main one is
+//! mostly a move of it and is rarely found; held, it stays in the residuals, and so does a main
+//! source that really moves between its episodes.
 
 use super::{GnssProblem, Network};
 use crate::analysis::projection::{orthonormal, project};
+use crate::analysis::MainSource;
 use crate::data::SplitName;
 use crate::numerics::median;
 use anyhow::{anyhow, bail, Result};
 use magic_core::{invert_at, Model, Workspace};
+use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde_json::json;
 use std::sync::{Arc, OnceLock};
@@ -35,6 +44,14 @@ pub struct SourceGrid {
     /// The pattern of a unit source at each point, projected off `basis`.
     pub patterns: Vec<Vec<f64>>,
 }
+
+/// The main source's variables (x, y, depth, volume change): the first of every GNSS model.
+const SOURCE_VARIABLES: usize = 4;
+
+/// Least share (squared norm) of each direction of the main source's span that must lie off the
+/// nuisances (translations, declared latent effects) for the source to be held in place (see
+/// [`held_source`]).
+const MIN_OFF_NUISANCE: f64 = 1e-6;
 
 /// Fewest days of a split the analysis accepts.
 pub const MIN_DAYS: usize = 360;
@@ -76,8 +93,9 @@ pub struct Context {
     /// The main source's typical position (x, y, depth): the encoder's median over the days of
     /// largest volume change.
     pub main_source: [f64; 3],
-    /// Orthonormal basis (standardised units) of the directions F can already produce by
-    /// adjusting its variables around their typical values.
+    /// Orthonormal basis (standardised units) of the directions F already produces around its
+    /// typical state: the main source's (free or held, [`MainSource`]) and the declared latent
+    /// effects'.
     pub tangent: Vec<Vec<f64>>,
     /// Sum of squares of the analysed days' (real) residuals: the denominator of the latent
     /// families' shares, for the data and its surrogates alike.
@@ -109,8 +127,8 @@ impl GnssResiduals {
         self.ctx.network.len()
     }
 
-    /// `g` without its part in the span of F's Jacobian: what remains of an effect of pattern
-    /// `g` after the encoder has absorbed what F can mimic.
+    /// `g` without its part along [`Context::tangent`]: what remains of an effect of pattern `g`
+    /// once F has absorbed what it already produces.
     pub fn project(&self, g: &[f64]) -> Vec<f64> {
         project(&self.ctx.tangent, g)
     }
@@ -224,6 +242,7 @@ pub fn residuals(
     p: &GnssProblem,
     model: &Model<'_>,
     splits: &[SplitName],
+    mode: MainSource,
 ) -> Result<GnssResiduals> {
     let nc = p.data.n_obs();
     if model.n_obs() != nc {
@@ -257,7 +276,7 @@ pub fn residuals(
             .collect::<Vec<_>>(),
     );
     let scale = &p.data.scale;
-    let tangent = tangent_basis(model, scale, main, days[days.len() / 2])?;
+    let columns = jacobian_columns(model, scale, main, days[days.len() / 2])?;
     let mse = rows
         .iter()
         .flat_map(|d| (0..nc).map(move |c| ((d.obs[c] - d.physics[c]) / scale[c]).powi(2)))
@@ -267,17 +286,21 @@ pub fn residuals(
     // effects at zero), standardised and projected off F's Jacobian.
     let mut p0 = vec![0.0; np];
     p0[..3].copy_from_slice(&main);
-    let r: Vec<Vec<f64>> = rows
+    let rows: Vec<Vec<f64>> = rows
         .par_iter()
         .zip(days.par_iter())
         .map(|(d, t)| {
             let mut f = vec![0.0; nc];
             magic_core::invert::forward(model, &p0, *t, &mut f)
                 .map_err(|e| anyhow!("day {t}: {e}"))?;
-            let row: Vec<f64> = (0..nc).map(|c| (d.obs[c] - f[c]) / scale[c]).collect();
-            Ok(project(&tangent, &row))
+            Ok((0..nc).map(|c| (d.obs[c] - f[c]) / scale[c]).collect())
         })
         .collect::<Result<_>>()?;
+    let tangent = match mode {
+        MainSource::Free => orthonormal(&columns, 1e-9, 1),
+        MainSource::Held => held_tangent(&columns, scale, p.network.len(), &rows),
+    };
+    let r: Vec<Vec<f64>> = rows.par_iter().map(|row| project(&tangent, row)).collect();
     let mut fit = Block {
         days,
         r: r.concat(),
@@ -311,15 +334,16 @@ pub fn residuals(
     })
 }
 
-/// Orthonormal basis of the columns of F's Jacobian (standardised units) at the main source's
-/// typical position with a unit volume change (the span does not depend on the volume) and the
-/// latent effects at zero (they enter linearly).
-fn tangent_basis(
+/// The columns of F's Jacobian (standardised units, each with its largest entry) at the main
+/// source's typical position with a unit volume change (the span does not depend on the volume)
+/// and the latent effects at zero (they enter linearly): the main source's position, depth and
+/// volume, then the declared latent effects'.
+fn jacobian_columns(
     model: &Model<'_>,
     scale: &[f64],
     main: [f64; 3],
     day: f64,
-) -> Result<Vec<Vec<f64>>> {
+) -> Result<Vec<(Vec<f64>, f64)>> {
     const N: usize = magic_core::model_file::MAX_PARAMS;
     let np = model.n_params();
     let nc = scale.len();
@@ -335,14 +359,109 @@ fn tangent_basis(
     let mut out = vec![magic_core::Dual::<N>::constant(0.0); nc];
     magic_core::invert::forward(model, &p[..np], day, &mut out)
         .map_err(|e| anyhow!("F's Jacobian: {e}"))?;
-    let columns: Vec<(Vec<f64>, f64)> = (0..np)
+    Ok((0..np)
         .map(|j| {
             let v: Vec<f64> = (0..nc).map(|c| out[c].d[j] / scale[c]).collect();
             let s = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
             (v, s)
         })
+        .collect())
+}
+
+/// The tangent basis with the main source held in place ([`MainSource::Held`]): its field's
+/// direction ([`held_source`], fitted with the declared latent effects, free every day, and the
+/// network's translations as nuisances) and the declared latent effects' directions. (A span
+/// that holds a translation cannot tell the source from a common mode: then the source is left
+/// free to move, its whole span projected off.)
+fn held_tangent(
+    columns: &[(Vec<f64>, f64)],
+    scale: &[f64],
+    ns: usize,
+    rows: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    let k = SOURCE_VARIABLES.min(columns.len());
+    let source = orthonormal(&columns[..k], 1e-9, 1);
+    let latent = orthonormal(&columns[k..], 1e-9, 1);
+    let unit =
+        |v: &[Vec<f64>]| -> Vec<(Vec<f64>, f64)> { v.iter().map(|q| (q.clone(), 1.0)).collect() };
+    let mut nuisance = translation_basis(scale, ns);
+    nuisance.extend(latent.iter().cloned());
+    let nuisance = orthonormal(&unit(&nuisance), 1e-9, 2);
+    let mut tangent = match held_source(&source, &nuisance, rows) {
+        Some(w) => vec![w],
+        None => source,
+    };
+    tangent.extend(latent);
+    orthonormal(&unit(&tangent), 1e-9, 2)
+}
+
+/// The main source held in place: the one direction, within the span of its own Jacobian
+/// (`source`, orthonormal), along which the rows vary most — the field of a source at a fixed
+/// position whose volume changes (to first order around the typical position). What the rows
+/// hold along the span's other directions (the source moving over time) is left in the
+/// residuals: a second source near the main one, which the encoder mimics by moving the main
+/// one, stays visible there. Each row's coordinates in the span are fitted with `nuisance`
+/// (orthonormal: the network's translations, the declared latent effects) beside them, so that a
+/// common mode, which the span partly holds, does not tilt the direction away from the source's
+/// field.
+fn held_source(source: &[Vec<f64>], nuisance: &[Vec<f64>], rows: &[Vec<f64>]) -> Option<Vec<f64>> {
+    let k = source.len();
+    let nc = source.first()?.len();
+    // B = the span's directions off the nuisances; a row's coordinates: (BᵀB)⁻¹ Bᵀ row.
+    let b: Vec<Vec<f64>> = source.iter().map(|q| project(nuisance, q)).collect();
+    let btb = DMatrix::from_fn(k, k, |i, j| dot(&b[i], &b[j]));
+    // Its eigenvalues lie in [0, 1]: near 0, a direction of the span is a nuisance's.
+    if btb.clone().symmetric_eigen().eigenvalues.min() < MIN_OFF_NUISANCE {
+        return None;
+    }
+    let inv = btb.try_inverse()?;
+    let coords: Vec<DVector<f64>> = rows
+        .iter()
+        .map(|row| &inv * DVector::from_iterator(k, b.iter().map(|q| dot(q, row))))
         .collect();
-    Ok(orthonormal(&columns, 1e-9, 1))
+    let n = coords.len().max(1) as f64;
+    let mean = coords.iter().fold(DVector::zeros(k), |m, c| m + c) / n;
+    let cov = coords.iter().fold(DMatrix::zeros(k, k), |m, c| {
+        let d = c - &mean;
+        m + &d * d.transpose()
+    });
+    let eig = cov.symmetric_eigen();
+    let u = eig.eigenvectors.column(eig.eigenvalues.imax());
+    let w: Vec<f64> = (0..nc)
+        .map(|c| source.iter().zip(u.iter()).map(|(q, x)| q[c] * x).sum())
+        .collect();
+    let norm = dot(&w, &w).sqrt();
+    (norm > 0.0).then(|| w.iter().map(|x| x / norm).collect())
+}
+
+/// The network's translation by 1 mm along component `k` (E, N, U) in standardised units, for
+/// channels ordered component by component over `ns` stations.
+pub fn translation(scale: &[f64], ns: usize, k: usize) -> Vec<f64> {
+    (0..scale.len())
+        .map(|c| {
+            if c / ns.max(1) == k {
+                1.0 / scale[c]
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Orthonormal basis of the network's translations ([`translation`], every component).
+fn translation_basis(scale: &[f64], ns: usize) -> Vec<Vec<f64>> {
+    let columns: Vec<(Vec<f64>, f64)> = (0..scale.len() / ns.max(1))
+        .map(|k| {
+            let g = translation(scale, ns, k);
+            let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            (g, s)
+        })
+        .collect();
+    orthonormal(&columns, 1e-9, 2)
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// Median position of the source over the days with the largest |ΔV| (the top quarter).
@@ -379,4 +498,63 @@ fn dominant_pattern(r: &[f64], nc: usize) -> (Vec<f64>, f64) {
         v = w.iter().map(|x| x / n).collect();
     }
     (v, if total > 0.0 { lambda / total } else { 0.0 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    /// A source at a fixed position whose volume changes, a network translation that overlaps its
+    /// Jacobian's span, and noise: the held direction is the source's field, the translation's
+    /// part in the span notwithstanding.
+    #[test]
+    fn the_held_source_is_the_field_of_a_source_that_stays_put() {
+        let (ns, nc) = (6, 18);
+        let mut rng = StdRng::seed_from_u64(7);
+        let mut normal = move || {
+            // Box–Muller.
+            let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
+            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+        };
+        let scale = vec![1.0; nc];
+        let up = translation(&scale, ns, 2);
+        // The span: a direction close to the vertical translation (a deep source's uplift) and
+        // three random ones.
+        let near_up: Vec<f64> = up.iter().map(|u| u + 0.3 * normal()).collect();
+        let mut cols: Vec<(Vec<f64>, f64)> = vec![(near_up, 1.0)];
+        for _ in 0..3 {
+            cols.push(((0..nc).map(|_| normal()).collect(), 1.0));
+        }
+        let source = orthonormal(&cols, 1e-9, 2);
+        let weights = [0.3, 1.0, -0.6, 0.4];
+        let field: Vec<f64> = (0..nc)
+            .map(|c| source.iter().zip(weights).map(|(q, w)| q[c] * w).sum())
+            .collect();
+        let norm = dot(&field, &field).sqrt();
+        let rows: Vec<Vec<f64>> = (0..2000)
+            .map(|t| {
+                let a = (t as f64 / 150.0).sin() * 3.0;
+                let drift = 4.0 * normal();
+                (0..nc)
+                    .map(|c| a * field[c] + drift * up[c] + 0.05 * normal())
+                    .collect()
+            })
+            .collect();
+        let translations = translation_basis(&scale, ns);
+        let w = held_source(&source, &translations, &rows).unwrap();
+        let cos = dot(&w, &field).abs() / norm;
+        assert!(cos > 0.9999, "cosine with the source's field {cos}");
+        // Without the translations as nuisances the common mode, larger than the source here,
+        // would be taken for it.
+        let naive = held_source(&source, &[], &rows).unwrap();
+        assert!(dot(&naive, &field).abs() / norm < 0.9, "naive direction");
+        // A span that holds the translation itself cannot tell the two apart: not held.
+        let mut with_up = vec![up.clone()];
+        with_up.extend(source[1..].iter().cloned());
+        let with_up: Vec<(Vec<f64>, f64)> = with_up.into_iter().map(|q| (q, 1.0)).collect();
+        let with_up = orthonormal(&with_up, 1e-9, 2);
+        assert!(held_source(&with_up, &translations, &rows).is_none());
+    }
 }

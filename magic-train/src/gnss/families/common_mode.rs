@@ -4,6 +4,7 @@
 
 use super::latent::{self, round3, LatentFit};
 use crate::analysis::Family;
+use crate::gnss::residuals::translation;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
 use anyhow::Result;
@@ -18,19 +19,7 @@ pub struct CommonMode;
 pub fn patterns(res: &GnssResiduals) -> Vec<Vec<f64>> {
     let (ns, nc) = (res.ns(), res.nc());
     (0..nc / ns)
-        .map(|k| {
-            res.project(
-                &(0..nc)
-                    .map(|c| {
-                        if c / ns == k {
-                            1.0 / res.ctx.scale[c]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect::<Vec<_>>(),
-            )
-        })
+        .map(|k| res.project(&translation(&res.ctx.scale, ns, k)))
         .collect()
 }
 

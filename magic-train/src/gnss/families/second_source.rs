@@ -21,7 +21,7 @@
 use super::latent::{self, round3, Cross};
 use crate::analysis::projection::{orthonormal, project};
 use crate::analysis::Family;
-use crate::gnss::residuals::SourceGrid;
+use crate::gnss::residuals::{translation, SourceGrid};
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
 use crate::numerics::median;
@@ -92,15 +92,7 @@ fn nuisance_basis(res: &GnssResiduals) -> Vec<Vec<f64>> {
     let mut columns: Vec<(Vec<f64>, f64)> =
         res.ctx.tangent.iter().map(|q| (q.clone(), 1.0)).collect();
     for k in 0..nc / ns {
-        let g: Vec<f64> = (0..nc)
-            .map(|c| {
-                if c / ns == k {
-                    1.0 / res.ctx.scale[c]
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let g = translation(&res.ctx.scale, ns, k);
         let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         columns.push((g, s));
     }
