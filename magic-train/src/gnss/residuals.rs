@@ -283,7 +283,7 @@ pub fn residuals(
         .sum::<f64>()
         / (rows.len() * nc) as f64;
     // Observations less F's time-dependent effects (F with the source's volume and the latent
-    // effects at zero), standardised and projected off F's Jacobian.
+    // effects at zero), standardised; then projected off F's tangent (free or held).
     let mut p0 = vec![0.0; np];
     p0[..3].copy_from_slice(&main);
     let rows: Vec<Vec<f64>> = rows
@@ -503,8 +503,9 @@ fn dominant_pattern(r: &[f64], nc: usize) -> (Vec<f64>, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gnss::synth::draw;
     use rand::rngs::StdRng;
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
 
     /// A source at a fixed position whose volume changes, a network translation that overlaps its
     /// Jacobian's span, and noise: the held direction is the source's field, the translation's
@@ -513,11 +514,7 @@ mod tests {
     fn the_held_source_is_the_field_of_a_source_that_stays_put() {
         let (ns, nc) = (6, 18);
         let mut rng = StdRng::seed_from_u64(7);
-        let mut normal = move || {
-            // Box–Muller.
-            let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-12), rng.random());
-            (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-        };
+        let mut normal = move || draw::normal(&mut rng);
         let scale = vec![1.0; nc];
         let up = translation(&scale, ns, 2);
         // The span: a direction close to the vertical translation (a deep source's uplift) and

@@ -18,7 +18,7 @@
 //! a 2008 inflation and a smaller 2021 pulse of the main source, on the release's 2006–2024
 //! record).
 
-mod draw;
+pub(crate) mod draw;
 pub mod inject;
 pub mod noise;
 pub mod record;
