@@ -23,14 +23,18 @@ pub fn patterns(res: &GnssResiduals) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The RMS (mm) of the persistent part of each component's daily network mean.
+/// The RMS (mm) of the persistent part of each component's daily network mean that the stations
+/// share: less what each station's own persistent noise puts into the mean
+/// ([`latent::persistent_noise`]).
 fn rms_mm(res: &GnssResiduals) -> Vec<f64> {
+    let (r, nc) = (&res.fit.r, res.nc());
     patterns(res)
         .iter()
         .map(|g| {
             // g is 1/scale on the component: the amplitude is the weighted network mean in mm.
-            let a = latent::daily_amplitude(&res.fit.r, res.nc(), g);
-            latent::persistent_var(&a).max(0.0).sqrt()
+            let a = latent::daily_amplitude(r, nc, g);
+            let shared = latent::persistent_var(&a) - latent::persistent_noise(r, nc, g, &a);
+            shared.max(0.0).sqrt()
         })
         .collect()
 }
@@ -55,7 +59,8 @@ impl Family<GnssResiduals> for CommonMode {
     ) -> Result<GnssResiduals> {
         Ok(latent::surrogate(res, &patterns(res), rng))
     }
-    /// The RMS (mm) of the persistent part of each component's daily network mean.
+    /// The RMS (mm) of the persistent part of each component's daily network mean that the
+    /// stations share.
     fn params(&self, res: &GnssResiduals, fit: &LatentFit) -> serde_json::Value {
         let rms: Vec<f64> = rms_mm(res).iter().map(|v| round3(*v)).collect();
         json!({"rms_mm": rms, "neighbour_days": fit.window})

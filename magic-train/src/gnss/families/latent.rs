@@ -335,6 +335,29 @@ pub fn persistent_var(a: &[f64]) -> f64 {
     a.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / (a.len() - 1) as f64
 }
 
+/// The part of [`persistent_var`] of a pattern's daily amplitude `a` (from [`daily_amplitude`])
+/// that the channels' own persistent noise puts there: each channel's lag-one autocovariance about
+/// the daily fit, weighted by the pattern's square, the channels taken independent.
+///
+/// Slow per-station noise (monument wander) is persistent from day to day: its network average is
+/// part of `persistent_var(a)` though no station shares it. Subtracting this leaves the part the
+/// stations share.
+pub fn persistent_noise(r: &[f64], nc: usize, g: &[f64], a: &[f64]) -> f64 {
+    let gg: f64 = g.iter().map(|v| v * v).sum();
+    let t_n = a.len();
+    if gg < DECLARED_NORM2 || t_n < 2 || r.len() != t_n * nc {
+        return 0.0;
+    }
+    let mut lag1 = vec![0.0; nc];
+    for t in 1..t_n {
+        let (prev, row) = (&r[(t - 1) * nc..t * nc], &r[t * nc..(t + 1) * nc]);
+        for c in 0..nc {
+            lag1[c] += (prev[c] - a[t - 1] * g[c]) * (row[c] - a[t] * g[c]);
+        }
+    }
+    g.iter().zip(&lag1).map(|(x, l)| x * x * l).sum::<f64>() / ((t_n - 1) as f64 * gg * gg)
+}
+
 /// A latent family's surrogate: the daily fits of `patterns` removed, every station's series
 /// given a random sign and direction of time, projected again.
 pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
@@ -432,6 +455,39 @@ mod tests {
     fn noise(n: usize, seed: u64) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
         (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    /// Slow noise of each channel's own (AR(1), φ = 0.99) is persistent, so it puts a share into
+    /// the daily amplitude's lag-one autocovariance; [`persistent_noise`] takes that share off and
+    /// leaves the shared term's variance.
+    #[test]
+    fn persistent_noise_leaves_what_the_channels_share() {
+        let (nc, t_n, phi) = (12, 4000, 0.99);
+        let mut rng = StdRng::seed_from_u64(5);
+        let mut step = |x: &mut f64, sd: f64| {
+            *x = phi * *x + sd * (1.0 - phi * phi).sqrt() * rng.random_range(-1.7..1.7f64);
+        };
+        let (mut own, mut shared) = (vec![0.0; nc], 0.0);
+        let mut r = vec![0.0; t_n * nc];
+        let mut truth = vec![0.0; t_n];
+        for t in 0..t_n {
+            step(&mut shared, 0.5);
+            truth[t] = shared;
+            for c in 0..nc {
+                step(&mut own[c], 2.0);
+                r[t * nc + c] = own[c] + shared;
+            }
+        }
+        let g = vec![1.0; nc];
+        let a = daily_amplitude(&r, nc, &g);
+        let (all, floor) = (persistent_var(&a), persistent_noise(&r, nc, &g, &a));
+        let want = persistent_var(&truth);
+        // Own noise's share of the network mean: about 2² / 12 ≈ 0.33 against 0.25 shared.
+        assert!(all - want > 0.15, "{all} {want}");
+        assert!(
+            (all - floor - want).abs() < 0.25 * want,
+            "{all} {floor} {want}"
+        );
     }
 
     /// Zero-lag cross products of the channels (`nc × nc`).

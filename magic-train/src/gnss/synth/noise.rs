@@ -15,7 +15,6 @@ use super::draw::{ar1_phi, normal, rms_about_mean, round3, stream};
 use super::record::Layout;
 use super::source::{self, History};
 use super::truth::Injected;
-use crate::data::SplitName;
 use crate::gnss::Network;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -192,11 +191,7 @@ fn red(seed: u64, network: &Network, layout: &Layout, rows: &mut [Vec<f64>]) -> 
             *o += v + common[c / ns][t];
         }
     }
-    let (a, b) = layout.range(SplitName::Train);
-    let rms: Vec<f64> = common
-        .iter()
-        .map(|v| round3(rms_about_mean(&v[a..b])))
-        .collect();
+    let rms: Vec<f64> = common.iter().map(|v| round3(rms_about_mean(v))).collect();
     let per_station = |j: usize| {
         let v: [f64; 3] = core::array::from_fn(|k| round3(coef[k][j].hypot(coef[k][j + 1])));
         let m: serde_json::Map<String, serde_json::Value> = network

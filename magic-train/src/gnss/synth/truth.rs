@@ -11,8 +11,8 @@
 //! `effects` lists the injected effects with the parameter names of the analysis's families
 //! (`gnss/families/*.rs`): step `station`, `epoch` (YYYY-MM-DD), `offset_mm` (E, N, U);
 //! second_source `x_km`, `y_km`, `depth_km`, `start`, `end`, `peak_dv_1e6m3` (and `shape`:
-//! `pulse` or `lasting`); elevation `mm_per_km` (RMS of the daily slope over the training
-//! period); common_mode `rms_mm` (E, N, U over the training period); seasonal `annual_mm`,
+//! `pulse` or `lasting`); elevation `mm_per_km` (RMS of the daily slope over the whole
+//! record); common_mode `rms_mm` (E, N, U over the whole record); seasonal `annual_mm`,
 //! `semiannual_mm` per station; drift `rate_mm_per_yr` per drifting station. Where the noise
 //! itself holds a family's signal (the `red` model's common mode and its annual term), an
 //! injected effect of that family states what the data hold in all (injected plus noise), and

@@ -8,17 +8,17 @@ use rand::rngs::StdRng;
 use rand::Rng;
 use serde_json::json;
 
-/// Adds the translation; `rms_mm` is the RMS over the training period of the whole persistent
-/// common mode the data hold (this one, plus the noise's where it has one).
+/// Adds the translation (scaled to its RMS over the training period); `rms_mm` is the RMS over
+/// the whole record of the persistent common mode the data hold (this one, plus the noise's where
+/// it has one): what an analysis of every day estimates.
 pub fn inject(ctx: &Ctx<'_>, rng: &mut StdRng, rows: &mut [Vec<f64>]) -> serde_json::Value {
     let (ns, n_days) = (ctx.ns(), rows.len());
-    let (a, b) = ctx.train();
     let rms = [
         rng.random_range(1.5..3.0),
         rng.random_range(1.5..3.0),
         rng.random_range(3.0..6.0),
     ];
-    let mut total = rms;
+    let mut total = [0.0; 3];
     for (k, r) in rms.iter().enumerate() {
         let mut v = ar1(rng, n_days, 60.0);
         ctx.set_train_rms(&mut v, *r);
@@ -27,10 +27,12 @@ pub fn inject(ctx: &Ctx<'_>, rng: &mut StdRng, rows: &mut [Vec<f64>]) -> serde_j
                 *o += v[t];
             }
         }
-        if let Some(bg) = &ctx.background.common {
-            let sum: Vec<f64> = (a..b).map(|t| v[t] + bg[k][t]).collect();
-            total[k] = rms_about_mean(&sum);
-        }
+        total[k] = match &ctx.background.common {
+            Some(bg) => {
+                rms_about_mean(&v.iter().zip(&bg[k]).map(|(x, b)| x + b).collect::<Vec<_>>())
+            }
+            None => rms_about_mean(&v),
+        };
     }
     json!({"rms_mm": total.map(round3)})
 }

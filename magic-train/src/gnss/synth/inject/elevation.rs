@@ -2,15 +2,16 @@
 //! delay error), with `k` weather (an AR(1) over ~20 days) plus a season, scaled to an RMS of
 //! 25–50 mm/km over the training period.
 
-use super::super::draw::{ar1, round3};
+use super::super::draw::{ar1, rms_about_mean, round3};
 use super::Ctx;
 use rand::rngs::StdRng;
 use rand::Rng;
 use serde_json::json;
 use std::f64::consts::TAU;
 
-/// Adds the term; `mm_per_km` is the RMS of `k` over the training period, `z_ref_km` the mean
-/// station elevation.
+/// Adds the term (`k` scaled to its RMS over the training period); `mm_per_km` is the RMS of `k`
+/// over the whole record (what an analysis of every day estimates), `z_ref_km` the mean station
+/// elevation.
 pub fn inject(ctx: &Ctx<'_>, rng: &mut StdRng, rows: &mut [Vec<f64>]) -> serde_json::Value {
     let ns = ctx.ns();
     let stations = &ctx.network.stations;
@@ -27,5 +28,5 @@ pub fn inject(ctx: &Ctx<'_>, rng: &mut StdRng, rows: &mut [Vec<f64>]) -> serde_j
             row[2 * ns + i] += k[t] * (st.z_km - z_ref);
         }
     }
-    json!({"mm_per_km": round3(rate), "z_ref_km": z_ref})
+    json!({"mm_per_km": round3(rms_about_mean(&k)), "z_ref_km": z_ref})
 }
