@@ -103,6 +103,28 @@ pub trait Real:
 
     /// A constant (derivatives zero).
     fn c(v: f64) -> Self;
+    /// A constant given in both precisions, `v` and `v_f32` = `v as f32` (a table rounded when
+    /// compiled): `c(v)`, except for `f32`, which takes `v_f32` as it is. The same value either
+    /// way; on the Cortex-M4F the conversion `c(v)` makes at run time is a software call (about
+    /// thirty instructions) wherever the compiler cannot fold it, as in a loop over a table.
+    ///
+    /// ```
+    /// use magic_core::Real;
+    /// const V: f64 = 1.0 / 3.0;
+    /// assert_eq!(<f32 as Real>::c_pair(V, V as f32), <f32 as Real>::c(V));
+    /// assert_eq!(<f64 as Real>::c_pair(V, V as f32), V);
+    /// ```
+    #[inline(always)]
+    fn c_pair(v: f64, v_f32: f32) -> Self {
+        let _ = v_f32;
+        Self::c(v)
+    }
+    /// A constant from an `f32` (a model file's parameter): `c(v as f64)`, exact in every type,
+    /// and for `f32` the value itself, without the round trip through `f64`.
+    #[inline(always)]
+    fn c_f32(v: f32) -> Self {
+        Self::c(v as f64)
+    }
     /// `self · k` for a plain factor `k`; for a dual this scales the derivatives, where
     /// `self * Self::from_plain(k)` would apply the product rule to zero derivatives.
     fn scale(self, k: Self::Plain) -> Self;
@@ -336,6 +358,14 @@ impl Real for f32 {
     #[inline]
     fn c(v: f64) -> Self {
         v as f32
+    }
+    #[inline(always)]
+    fn c_pair(_: f64, v_f32: f32) -> Self {
+        v_f32
+    }
+    #[inline(always)]
+    fn c_f32(v: f32) -> Self {
+        v
     }
     #[inline]
     fn scale(self, k: f32) -> Self {

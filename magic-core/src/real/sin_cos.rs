@@ -39,50 +39,66 @@ pub fn fraction<R: Real>(x: R) -> R {
     }
 }
 
+/// A table of constants in both precisions, for [`Real::c_pair`].
+const fn paired<const N: usize>(v: [f64; N]) -> [(f64, f32); N] {
+    let mut out = [(0.0, 0.0); N];
+    let mut i = 0;
+    while i < N {
+        out[i] = (v[i], v[i] as f32);
+        i += 1;
+    }
+    out
+}
+
+/// The bounds between quarter turns, and the quarter turns.
+const QUARTER_BOUNDS: [(f64, f32); 4] = paired([0.125, 0.375, 0.625, 0.875]);
+const QUARTERS: [(f64, f32); 5] = paired([0.0, 0.25, 0.5, 0.75, 1.0]);
+/// 1 / ((2k)(2k + 1)), k = 1..=8: the sine's Horner factors.
+const S: [(f64, f32); 8] = paired([
+    1.0 / 6.0,
+    1.0 / 20.0,
+    1.0 / 42.0,
+    1.0 / 72.0,
+    1.0 / 110.0,
+    1.0 / 156.0,
+    1.0 / 210.0,
+    1.0 / 272.0,
+]);
+/// 1 / ((2k − 1)(2k)), k = 1..=9: the cosine's.
+const C: [(f64, f32); 9] = paired([
+    1.0 / 2.0,
+    1.0 / 12.0,
+    1.0 / 30.0,
+    1.0 / 56.0,
+    1.0 / 90.0,
+    1.0 / 132.0,
+    1.0 / 182.0,
+    1.0 / 240.0,
+    1.0 / 306.0,
+]);
+
 /// `sin(2πf)` and `cos(2πf)` for a fraction of a turn `f` in [0, 1), in `R`: the nearest quarter
 /// turn is taken out, and the rest, |x| ≤ π/4, goes through the Taylor series
 /// up to x¹⁷ / x¹⁸ (truncation below 1e-19), evaluated in `R`. No library call: on the board
 /// (`R = f32`) libm's `sinf`/`cosf` would bring their f64 argument reduction (about 3 KB of
 /// flash) for this one term; on the host (`R = f64`) the result is within a few ulps of libm's.
 pub fn sin_cos_turn<R: Real>(f: R) -> (R, R) {
-    // 1 / ((2k)(2k + 1)), k = 1..=8, and 1 / ((2k − 1)(2k)), k = 1..=9.
-    const S: [f64; 8] = [
-        1.0 / 6.0,
-        1.0 / 20.0,
-        1.0 / 42.0,
-        1.0 / 72.0,
-        1.0 / 110.0,
-        1.0 / 156.0,
-        1.0 / 210.0,
-        1.0 / 272.0,
-    ];
-    const C: [f64; 9] = [
-        1.0 / 2.0,
-        1.0 / 12.0,
-        1.0 / 30.0,
-        1.0 / 56.0,
-        1.0 / 90.0,
-        1.0 / 132.0,
-        1.0 / 182.0,
-        1.0 / 240.0,
-        1.0 / 306.0,
-    ];
     // The nearest quarter turn, by comparisons (the bounds are exact in binary).
-    let q = [0.125, 0.375, 0.625, 0.875]
+    let q = QUARTER_BOUNDS
         .iter()
-        .filter(|&&b| f >= R::c(b))
+        .filter(|&&(b, b32)| f >= R::c_pair(b, b32))
         .count();
-    let quarter = [0.0, 0.25, 0.5, 0.75, 1.0].get(q).copied().unwrap_or(0.0);
-    let x = R::c(TWO_PI) * (f - R::c(quarter));
+    let (quarter, quarter32) = QUARTERS.get(q).copied().unwrap_or((0.0, 0.0));
+    let x = R::c(TWO_PI) * (f - R::c_pair(quarter, quarter32));
     let x2 = x * x;
     // Horner on x²: sin x = x (1 − x²/(2·3) (1 − x²/(4·5) (…))), cos x = 1 − x²/(1·2) (…).
     let mut s = R::one();
-    for &k in S.iter().rev() {
-        s = R::one() - x2 * s * R::c(k);
+    for &(k, k32) in S.iter().rev() {
+        s = R::one() - x2 * s * R::c_pair(k, k32);
     }
     let mut c = R::one();
-    for &k in C.iter().rev() {
-        c = R::one() - x2 * c * R::c(k);
+    for &(k, k32) in C.iter().rev() {
+        c = R::one() - x2 * c * R::c_pair(k, k32);
     }
     let s = x * s;
     match q % 4 {
