@@ -17,6 +17,17 @@ pub fn project(basis: &[Vec<f64>], g: &[f64]) -> Vec<f64> {
     out
 }
 
+/// A column for [`orthonormal`], with its largest entry (absolute) as its scale.
+///
+/// ```
+/// use magic_train::analysis::projection::scaled;
+/// assert_eq!(scaled(vec![0.5, -2.0, 1.0]), (vec![0.5, -2.0, 1.0], 2.0));
+/// ```
+pub fn scaled(col: Vec<f64>) -> (Vec<f64>, f64) {
+    let s = col.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    (col, s)
+}
+
 /// An orthonormal basis of the span of `columns` (modified Gram–Schmidt, `passes` times over the
 /// basis so far); a column whose remainder is below `rel_tol` of its largest entry (`scale`) is
 /// dependent on the others and dropped.

@@ -22,7 +22,7 @@
 //! source that really moves between its episodes.
 
 use super::{GnssProblem, Network};
-use crate::analysis::projection::{orthonormal, project};
+use crate::analysis::projection::{orthonormal, project, scaled};
 use crate::analysis::MainSource;
 use crate::data::SplitName;
 use crate::numerics::median;
@@ -360,11 +360,7 @@ fn jacobian_columns(
     magic_core::invert::forward(model, &p[..np], day, &mut out)
         .map_err(|e| anyhow!("F's Jacobian: {e}"))?;
     Ok((0..np)
-        .map(|j| {
-            let v: Vec<f64> = (0..nc).map(|c| out[c].d[j] / scale[c]).collect();
-            let s = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-            (v, s)
-        })
+        .map(|j| scaled((0..nc).map(|c| out[c].d[j] / scale[c]).collect()))
         .collect())
 }
 
@@ -451,11 +447,7 @@ pub fn translation(scale: &[f64], ns: usize, k: usize) -> Vec<f64> {
 /// Orthonormal basis of the network's translations ([`translation`], every component).
 fn translation_basis(scale: &[f64], ns: usize) -> Vec<Vec<f64>> {
     let columns: Vec<(Vec<f64>, f64)> = (0..scale.len() / ns.max(1))
-        .map(|k| {
-            let g = translation(scale, ns, k);
-            let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            (g, s)
-        })
+        .map(|k| scaled(translation(scale, ns, k)))
         .collect();
     orthonormal(&columns, 1e-9, 2)
 }

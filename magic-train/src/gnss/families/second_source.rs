@@ -19,7 +19,7 @@
 //! keeps the noise's coherence between stations instead ([`latent::resample_coherent`]).
 
 use super::latent::{self, round3, Cross};
-use crate::analysis::projection::{orthonormal, project};
+use crate::analysis::projection::{orthonormal, project, scaled};
 use crate::analysis::Family;
 use crate::gnss::residuals::{translation, SourceGrid};
 use crate::gnss::GnssResiduals;
@@ -91,11 +91,7 @@ fn nuisance_basis(res: &GnssResiduals) -> Vec<Vec<f64>> {
     let (ns, nc) = (res.ns(), res.nc());
     let mut columns: Vec<(Vec<f64>, f64)> =
         res.ctx.tangent.iter().map(|q| (q.clone(), 1.0)).collect();
-    for k in 0..nc / ns {
-        let g = translation(&res.ctx.scale, ns, k);
-        let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        columns.push((g, s));
-    }
+    columns.extend((0..nc / ns).map(|k| scaled(translation(&res.ctx.scale, ns, k))));
     orthonormal(&columns, 1e-9, 2)
 }
 
@@ -113,13 +109,7 @@ pub(super) fn translations(res: &GnssResiduals) -> Vec<Vec<f64>> {
 pub(super) fn with_translations(res: &GnssResiduals, pos: [f64; 3]) -> Vec<Vec<f64>> {
     let mut cols = vec![pattern(res, pos)];
     cols.extend(translations(res));
-    let cols: Vec<(Vec<f64>, f64)> = cols
-        .into_iter()
-        .map(|g| {
-            let s = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            (g, s)
-        })
-        .collect();
+    let cols: Vec<(Vec<f64>, f64)> = cols.into_iter().map(scaled).collect();
     orthonormal(&cols, 1e-9, 2)
 }
 
