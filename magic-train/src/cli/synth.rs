@@ -8,6 +8,7 @@ use crate::data::SplitName;
 use crate::gnss::data::write_dir;
 use crate::gnss::recovery::coverage::Coverage;
 use crate::gnss::recovery::looped::{loop_table, LoopRun};
+use crate::gnss::recovery::misses::miss_table;
 use crate::gnss::recovery::{check_one, recovery_table};
 use crate::gnss::synth::truth::injected;
 use crate::gnss::synth::{self, NoiseModel, Scenario, Spec};
@@ -171,6 +172,8 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
         rows.push(r);
     }
     let mut table = recovery_table(&rows);
+    table.push_str("\nWhy an injected effect was missed (placements together):\n\n");
+    table.push_str(&miss_table(&rows));
     if !coverage.is_empty() {
         table.push_str(
             "\nBootstrap standard deviations against the truth (significant candidates):\n\n",

@@ -40,6 +40,9 @@ pub struct Found {
     pub params_ok: bool,
     /// What was compared.
     pub detail: String,
+    /// Why its family's candidate cannot count as a discovery, if a rule rejected it (e.g. on
+    /// the bound of its search grid).
+    pub rejected: Option<String>,
 }
 
 impl Found {
@@ -253,6 +256,7 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
             rank: None,
             params_ok: false,
             detail: format!("family {} not analysed", e.family),
+            rejected: None,
         };
     };
     let (params_ok, detail) = compare(&e.family, &e.params, &c.params);
@@ -262,6 +266,7 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
         rank: pos.map(|i| i + 1),
         params_ok,
         detail,
+        rejected: c.rejected.clone(),
     }
 }
 
@@ -442,6 +447,7 @@ pub fn recovery_table(rows: &[Recovery]) -> String {
 
 pub mod coverage;
 pub mod looped;
+pub mod misses;
 
 #[cfg(test)]
 mod tests;

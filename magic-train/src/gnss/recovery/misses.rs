@@ -1,0 +1,132 @@
+//! Why an injected effect was missed: on which bound of its search grid it was rejected, or
+//! whether it was located but not significant, significant but off, or neither — counted per
+//! scenario and noise model over the placements (`magic synth-check` prints the table).
+
+use super::{Found, Recovery};
+use crate::gnss::families::second_source::{bound_of, Bound};
+use std::fmt::Write as _;
+
+/// Why an injected effect was not found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Miss {
+    /// Rejected on a bound of its search grid.
+    OnBound(Bound),
+    /// Rejected by another rule (e.g. a step's scan statistic not above the surrogates').
+    Rejected,
+    /// Its parameters recovered, not significant.
+    NotSignificant,
+    /// Significant, its parameters not recovered.
+    ParamsOff,
+    /// Neither (or its family not analysed).
+    Neither,
+}
+
+/// Why `f` was missed; `None` if it was found.
+pub fn miss(f: &Found) -> Option<Miss> {
+    if f.found() {
+        return None;
+    }
+    Some(match (&f.rejected, f.significant, f.params_ok) {
+        (Some(why), _, _) => bound_of(why).map_or(Miss::Rejected, Miss::OnBound),
+        (None, false, true) => Miss::NotSignificant,
+        (None, true, false) => Miss::ParamsOff,
+        _ => Miss::Neither,
+    })
+}
+
+/// The columns of [`miss_table`] after "found", in order.
+const COLUMNS: [(Miss, &str); 7] = [
+    (
+        Miss::OnBound(Bound::Shallowest),
+        "on the grid's shallowest depth",
+    ),
+    (Miss::OnBound(Bound::Deepest), "on its deepest depth"),
+    (Miss::OnBound(Bound::Edge), "on its horizontal edge"),
+    (Miss::Rejected, "rejected by another rule"),
+    (Miss::NotSignificant, "parameters right, not significant"),
+    (Miss::ParamsOff, "significant, parameters off"),
+    (Miss::Neither, "neither"),
+];
+
+/// Markdown: a line per scenario, noise model and injected effect (placements together) of
+/// runs, found, and each [`Miss`]; scenarios without an injected effect are left out.
+pub fn miss_table(rows: &[Recovery]) -> String {
+    let mut s = String::from("| scenario | noise | effect | runs | found |");
+    for (_, name) in COLUMNS {
+        let _ = write!(s, " {name} |");
+    }
+    s.push_str(&format!("\n|{}\n", "---|".repeat(5 + COLUMNS.len())));
+    let mut keys: Vec<(&str, &str, usize, &str)> = Vec::new();
+    for r in rows {
+        for (i, f) in r.effects.iter().enumerate() {
+            let k = (r.scenario.as_str(), r.noise.as_str(), i, f.family.as_str());
+            if !keys.contains(&k) {
+                keys.push(k);
+            }
+        }
+    }
+    for (sc, no, i, fam) in keys {
+        let g: Vec<&Found> = rows
+            .iter()
+            .filter(|r| (r.scenario.as_str(), r.noise.as_str()) == (sc, no))
+            .filter_map(|r| r.effects.get(i))
+            .collect();
+        let count = |m: Option<Miss>| g.iter().filter(|f| miss(f) == m).count();
+        let _ = write!(s, "| {sc} | {no} | {fam} | {} | {} |", g.len(), count(None));
+        for (m, _) in COLUMNS {
+            let _ = write!(s, " {} |", count(Some(m)));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn found(significant: bool, params_ok: bool, rejected: Option<&str>) -> Found {
+        Found {
+            family: "second_source".into(),
+            significant,
+            rank: Some(1),
+            params_ok,
+            detail: String::new(),
+            rejected: rejected.map(str::to_string),
+        }
+    }
+
+    fn row(placement: &str, f: Found) -> Recovery {
+        Recovery {
+            scenario: "second_source_near".into(),
+            noise: "paper".into(),
+            placement: placement.into(),
+            seed: 1,
+            top: f.family.clone(),
+            effects: vec![f],
+            false_additions: vec![],
+            background_found: vec![],
+        }
+    }
+
+    #[test]
+    fn each_miss_has_its_column() {
+        let shallow = "on the bound of the search grid (depth 2.0 km in [2.0, 20.0])";
+        let rows = [
+            row("train", found(true, true, None)),
+            row("valid", found(false, true, Some(shallow))),
+            row("test", found(false, true, None)),
+            row("train", found(true, false, None)),
+            row("valid", found(false, false, Some("statistic not above"))),
+            row("test", found(false, false, None)),
+        ];
+        assert_eq!(miss(&rows[0].effects[0]), None);
+        let t = miss_table(&rows);
+        let lines: Vec<&str> = t.lines().collect();
+        assert_eq!(lines.len(), 3, "{t}");
+        assert_eq!(
+            lines[2],
+            "| second_source_near | paper | second_source | 6 | 1 | 1 | 0 | 0 | 1 | 1 | 1 | 1 |"
+        );
+    }
+}
