@@ -297,7 +297,8 @@ pub enum Bound {
     Edge,
 }
 
-/// The bound a rejection reason (a candidate's `rejected`) names, if it is [`on_bound`]'s.
+/// The bound a rejection reason (a candidate's `rejected`) names, if it is the bound rule's
+/// ("on the bound of the search grid (…)", from the family's `reject`).
 ///
 /// ```
 /// use magic_train::gnss::families::second_source::{bound_of, Bound};
