@@ -9,7 +9,7 @@
 //!
 //! [`Effect`]: magic_core::effects::Effect
 
-use super::{AnalysisOptions, Candidate, ParamSd};
+use super::{stands_out, AnalysisOptions, Candidate, ParamSd};
 use crate::model::OwnedEffect;
 use anyhow::Result;
 use rand::rngs::StdRng;
@@ -43,6 +43,10 @@ pub trait Family<R>: Sync {
     /// surrogate's, where the score alone can be met by structure the surrogates lack (the step
     /// scan's peak: a level that wanders for years explains held-out days like a step, but only
     /// a step is sharper than the noise makes its local jumps); `None` for most families.
+    /// A statistic that stands out of the surrogates' by a margin like the score's
+    /// ([`stands_out`](super::stands_out)) makes the fit significant once its
+    /// held-out score exceeds chance at all: a local effect (a step in the record's last
+    /// months) can be clear and still explain little of the whole network's variance.
     fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
         None
     }
@@ -107,17 +111,22 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
         if let Some(why) = self.reject(res, &fit) {
             c.significant = false;
             c.rejected = Some(why);
-        } else if let Some(stat) = self.statistic(&fit) {
-            let top = surrogates
+        }
+        if let Some(stat) = self.statistic(&fit) {
+            let of_surrogates: Vec<f64> = surrogates.iter().filter_map(|s| s.1).collect();
+            let top = of_surrogates
                 .iter()
-                .filter_map(|s| s.1)
+                .copied()
                 .fold(f64::NEG_INFINITY, f64::max);
-            if stat <= top {
+            if c.rejected.is_none() && stat <= top {
                 c.significant = false;
                 c.rejected = Some(format!(
                     "detection statistic {stat:.3} not above the surrogates' largest, {top:.3}"
                 ));
+            } else if c.rejected.is_none() && c.excess() > 0.0 {
+                c.significant |= stands_out(stat, &of_surrogates);
             }
+            c.statistic = Some((stat, of_surrogates));
         }
         if c.significant && opts.bootstrap > 0 {
             c.uncertainty = bootstrap(self, res, &fit, opts)?;
@@ -166,4 +175,71 @@ fn bootstrap<R: Sync, F: Family<R>>(
             }
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A family whose "residuals" are a number: -1 the data (its fit scores `score` with
+    /// statistic `stat`), a surrogate's u in [0, 1) gives score 0.010 + 0.002 u, statistic
+    /// 20 + 5 u.
+    struct Toy {
+        score: f64,
+        stat: f64,
+    }
+
+    impl Family<f64> for Toy {
+        type Fit = (f64, f64);
+        fn name(&self) -> &'static str {
+            "toy"
+        }
+        fn fit(&self, res: &f64) -> Result<(f64, f64)> {
+            Ok(if *res < 0.0 {
+                (self.score, self.stat)
+            } else {
+                (0.010 + 0.002 * res, 20.0 + 5.0 * res)
+            })
+        }
+        fn score(&self, fit: &(f64, f64)) -> f64 {
+            fit.0
+        }
+        fn surrogate(&self, _: &f64, _: &(f64, f64), rng: &mut StdRng) -> Result<f64> {
+            Ok(rng.random())
+        }
+        fn params(&self, _: &f64, _: &(f64, f64)) -> serde_json::Value {
+            serde_json::Value::Null
+        }
+        fn declare(&self, _: &f64, _: &(f64, f64)) -> Option<OwnedEffect> {
+            None
+        }
+        fn statistic(&self, fit: &(f64, f64)) -> Option<f64> {
+            Some(fit.1)
+        }
+    }
+
+    fn assess(score: f64, stat: f64) -> Candidate {
+        let opts = AnalysisOptions {
+            bootstrap: 0,
+            ..AnalysisOptions::default()
+        };
+        Toy { score, stat }.assess(&-1.0, &opts).unwrap()
+    }
+
+    #[test]
+    fn a_statistic_that_stands_out_carries_a_score_just_above_chance() {
+        // Just above chance, within the score's margin: significant by the statistic alone.
+        let c = assess(0.0125, 90.0);
+        assert!(c.excess() > 0.0 && c.excess() < c.margin, "{c:?}");
+        assert!(c.significant && c.rejected.is_none(), "{c:?}");
+        assert_eq!(c.statistic.as_ref().map(|s| s.1.len()), Some(20));
+        // A statistic above the surrogates' largest but not by the margin: not significant.
+        assert!(!assess(0.0125, 26.0).significant);
+        // Below chance, however large the statistic: not significant.
+        assert!(!assess(0.005, 90.0).significant);
+        // A score beyond its margin with a statistic the surrogates reach: rejected.
+        let c = assess(0.2, 22.0);
+        assert!(!c.significant && c.rejected.is_some(), "{c:?}");
+        assert!(assess(0.2, 26.0).significant);
+    }
 }

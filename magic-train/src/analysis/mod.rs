@@ -13,7 +13,7 @@ pub mod projection;
 pub mod score;
 pub mod surrogate;
 
-pub use candidate::{Candidate, ParamSd, MIN_EXCESS, SD_MARGIN};
+pub use candidate::{stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
 pub use family::{surrogate_seeds, DynFamily, Family};
 
 use crate::data::SplitName;
