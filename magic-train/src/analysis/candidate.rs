@@ -86,10 +86,15 @@ pub fn stands_out(stat: f64, of_surrogates: &[f64]) -> bool {
     if of_surrogates.len() < 2 || !stat.is_finite() {
         return false;
     }
-    let roots: Vec<f64> = of_surrogates.iter().map(|v| v.max(0.0).sqrt()).collect();
     let top = of_surrogates.iter().copied().fold(f64::MIN, f64::max);
-    let t = roots.iter().sum::<f64>() / roots.len() as f64 + STAT_SD_MARGIN * sd(&roots);
-    stat > top && stat.max(0.0).sqrt() > t
+    stat > top && stat.max(0.0).sqrt() > root_threshold(of_surrogates, STAT_SD_MARGIN)
+}
+
+/// The mean plus `k` standard deviations of the square roots of `values` (negatives as 0): the
+/// scale on which chance scores and statistics are close to Gaussian.
+fn root_threshold(values: &[f64], k: f64) -> f64 {
+    let roots: Vec<f64> = values.iter().map(|v| v.max(0.0).sqrt()).collect();
+    roots.iter().sum::<f64>() / roots.len().max(1) as f64 + k * sd(&roots)
 }
 
 impl Candidate {
@@ -105,8 +110,7 @@ impl Candidate {
     ) -> Candidate {
         let chance_level = quantile(&chance, quantile_level).max(0.0);
         let chance_sd = sd(&chance);
-        let roots: Vec<f64> = chance.iter().map(|v| v.max(0.0).sqrt()).collect();
-        let t = roots.iter().sum::<f64>() / roots.len().max(1) as f64 + SD_MARGIN * sd(&roots);
+        let t = root_threshold(&chance, SD_MARGIN);
         let margin = MIN_EXCESS.max(t * t - chance_level);
         Candidate {
             family: family.into(),

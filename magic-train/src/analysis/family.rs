@@ -118,13 +118,15 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
                 .iter()
                 .copied()
                 .fold(f64::NEG_INFINITY, f64::max);
-            if c.rejected.is_none() && stat <= top {
-                c.significant = false;
-                c.rejected = Some(format!(
-                    "detection statistic {stat:.3} not above the surrogates' largest, {top:.3}"
-                ));
-            } else if c.rejected.is_none() && c.excess() > 0.0 {
-                c.significant |= stands_out(stat, &of_surrogates);
+            if c.rejected.is_none() {
+                if stat <= top {
+                    c.significant = false;
+                    c.rejected = Some(format!(
+                        "detection statistic {stat:.3} not above the surrogates' largest, {top:.3}"
+                    ));
+                } else if c.excess() > 0.0 {
+                    c.significant |= stands_out(stat, &of_surrogates);
+                }
             }
             c.statistic = Some((stat, of_surrogates));
         }
