@@ -7,8 +7,7 @@
 //! or the last layer, dequantises to f32.
 
 use crate::quant::{
-    matvec_i8_packed, pack_i8_pairs, pack_word, packed_set, packed_words, quantize,
-    requantize_floor, LeF32, LeI32,
+    matvec_i8_packed, pack_word, packed_set, packed_words, quantize, requantize_floor, LeF32, LeI32,
 };
 use crate::{Error, LayerArray, LayerFault, Net};
 use serde::{Deserialize, Serialize};
@@ -347,7 +346,7 @@ enum Dest<'a> {
 /// One int8 layer: `rows × cols` weights `w` (row-major; byte lengths checked by the caller) on
 /// packed activations `xp`. First every row's dot product into `acc` (the row-blocked kernel,
 /// two rows per activation load), then one pass over the rows adding the bias and requantising
-/// (four rows per pair of packed words) or dequantising.
+/// (then packed, four rows per pair of words: [`requantize_packed`]) or dequantising.
 #[allow(clippy::too_many_arguments)]
 fn int8_layer(
     w: &[u8],
@@ -364,28 +363,15 @@ fn int8_layer(
 ) {
     let rows = rows.min(acc.len());
     matvec_i8_packed(w, rows, cols, xp, acc);
-    let acc = &acc[..rows];
+    let acc = &mut acc[..rows];
     match dest {
         Dest::Int8 { xp: out, relu } => {
-            // One row per iteration into int8 (a simple loop the compiler keeps in registers),
-            // then the packing, four rows per pair of words.
-            let floor = if relu { 0 } else { -127 };
-            let mut q = [0i8; MAX_WIDTH];
-            for ((((o, &a), b), m), &sh) in q
-                .iter_mut()
-                .zip(acc)
-                .zip(bias.chunks_exact(4))
-                .zip(mult.chunks_exact(4))
-                .zip(shift)
-            {
-                *o = requantize_floor(a.saturating_add(le_i32(b)), le_i32(m), sh as i8, floor);
-            }
-            pack_i8_pairs(&q[..rows.min(MAX_WIDTH)], out);
+            requantize_packed(acc, bias, mult, shift, relu, out);
         }
         Dest::F32 { y, act } => {
             for (((o, &a), b), ws) in y
                 .iter_mut()
-                .zip(acc)
+                .zip(acc.iter())
                 .zip(bias.chunks_exact(4))
                 .zip(w_scale.chunks_exact(4))
             {
@@ -394,6 +380,45 @@ fn int8_layer(
                 *o = activate(a as f32 * (s * in_scale), act);
             }
         }
+    }
+}
+
+/// Requantises the accumulators `acc` of an int8 layer (plus `bias`, by the multipliers `mult`
+/// and shifts `shift`: four bytes, four bytes and one byte per row; lengths checked by the
+/// caller) into the next layer's packed activations `out` (the layout of
+/// [`crate::quant::pack_i8_pairs`]), with ReLU when `relu`. The int8 values go back into `acc`,
+/// one per row, and are packed from there, four rows per pair of words (zeros past the last
+/// row): no int8 buffer to clear first.
+fn requantize_packed(
+    acc: &mut [i32],
+    bias: &[u8],
+    mult: &[u8],
+    shift: &[u8],
+    relu: bool,
+    out: &mut [u32],
+) {
+    let floor = if relu { 0 } else { -127 };
+    for ((a, b), (m, &sh)) in acc
+        .iter_mut()
+        .zip(bias.chunks_exact(4))
+        .zip(mult.chunks_exact(4).zip(shift))
+    {
+        *a = requantize_floor(a.saturating_add(le_i32(b)), le_i32(m), sh as i8, floor) as i32;
+    }
+    let half = |v: i32| v as u32 & 0xFFFF;
+    let groups = acc.chunks_exact(4);
+    let tail = groups.remainder();
+    let mut words = out.chunks_exact_mut(2);
+    for (g, pair) in groups.zip(&mut words) {
+        if let [a0, a1, a2, a3] = *g {
+            pair[0] = half(a0) | ((a2 as u32) << 16);
+            pair[1] = half(a1) | ((a3 as u32) << 16);
+        }
+    }
+    if let (false, Some(pair)) = (tail.is_empty(), words.next()) {
+        let at = |j: usize| tail.get(j).copied().unwrap_or(0);
+        pair[0] = half(at(0)) | ((at(2) as u32) << 16);
+        pair[1] = half(at(1)) | ((at(3) as u32) << 16);
     }
 }
 
