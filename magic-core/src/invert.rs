@@ -211,40 +211,9 @@ pub fn invert_probed<R: Real, P: Problems, Q: Probe>(
     };
     let per_group = n_obs / groups.max(1);
     let track = groups <= 32 && (per_group == 3 || groups == n_obs);
-    let mut used = 0u32;
-    let mut g = 0usize;
     let mut z = [0f32; MAX_OBS];
-    let mut observed = 0usize;
-    // (The mean and scale are read in order, by iterators: no bounds checks in the loop.)
-    let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
-    for (i, (&x, zi)) in obs.iter().zip(z.iter_mut()).enumerate() {
-        let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
-        let bit = 1u32.wrapping_shl(g as u32);
-        g += 1;
-        if g >= groups {
-            g = 0;
-        }
-        if x.is_nan() {
-            continue;
-        }
-        if track {
-            used |= bit;
-        }
-        // (1e4 is exact in f32: the same test as in f64.)
-        if x.abs() > MAX_ABS_OBS as f32 {
-            if x.is_infinite() {
-                return Err(Error::NonFinite {
-                    what: "observation",
-                    index: i,
-                });
-            }
-            return Err(Error::OutOfRange {
-                what: "observation magnitude",
-            });
-        }
-        *zi = (x - mean) / scale;
-        observed += 1;
-    }
+    let (observed, used) = standardise(model, obs, groups, &mut z)?;
+    let used = if track { used } else { 0 };
     let n_params = model.n_params();
     if observed < n_params.max(1) {
         return Err(Error::TooFewObservations {
@@ -313,6 +282,56 @@ pub fn invert_probed<R: Real, P: Problems, Q: Probe>(
     out.flags = flags;
     out.used = used;
     Ok(())
+}
+
+/// Standardises the observations `obs` into `z` (`(x − mean) / scale`; a missing channel, NaN,
+/// stays as `z` holds it), checking their magnitude; returns the number of observed channels and
+/// the set of groups (channel i in group i mod `groups`, bit g for group g, modulo 32) that
+/// have one. (The means, scales and observations are read in order, by iterators: no bounds
+/// checks in the loop; one comparison passes every ordinary value, NaN and the too large fail
+/// it.)
+fn standardise(
+    model: &Model<'_>,
+    obs: &[f32],
+    groups: usize,
+    z: &mut [f32],
+) -> Result<(usize, u32), Error> {
+    let (mut observed, mut used) = (0usize, 0u32);
+    let (mut g, mut bit) = (0usize, 1u32);
+    let mut scales = model.obs_scale.iter();
+    let channels = obs.iter().zip(z.iter_mut()).zip(model.obs_mean.iter());
+    for (i, ((&x, zi), mean)) in channels.enumerate() {
+        let scale = scales.next().unwrap_or(0.0);
+        // (1e4 is exact in f32: the same test as in f64.)
+        if x.abs() <= MAX_ABS_OBS as f32 {
+            *zi = (x - mean) / scale;
+            observed += 1;
+            used |= bit;
+        } else if !x.is_nan() {
+            return Err(observation_error(x, i));
+        }
+        g += 1;
+        bit = bit.rotate_left(1);
+        if g >= groups {
+            (g, bit) = (0, 1);
+        }
+    }
+    Ok((observed, used))
+}
+
+/// The error for observation `index`, `x`, beyond [`MAX_ABS_OBS`] (not NaN).
+#[cold]
+fn observation_error(x: f32, index: usize) -> Error {
+    if x.is_infinite() {
+        Error::NonFinite {
+            what: "observation",
+            index,
+        }
+    } else {
+        Error::OutOfRange {
+            what: "observation magnitude",
+        }
+    }
 }
 
 /// Extra passes for a day with missing channels: each refills the missing channels with the
