@@ -125,6 +125,13 @@ pub trait Real:
     fn c_f32(v: f32) -> Self {
         Self::c(v as f64)
     }
+    /// `self − ⌊self⌋`, exactly, by comparisons with powers of two ([`sin_cos::fraction`]);
+    /// `f32` computes the same value from a conversion to an integer, which the Cortex-M4F does
+    /// in one instruction (the powers of two cost it about 370 instructions per call).
+    #[inline(always)]
+    fn fraction(self) -> Self {
+        sin_cos::fraction_by_powers(self)
+    }
     /// `self · k` for a plain factor `k`; for a dual this scales the derivatives, where
     /// `self * Self::from_plain(k)` would apply the product rule to zero derivatives.
     fn scale(self, k: Self::Plain) -> Self;
@@ -366,6 +373,10 @@ impl Real for f32 {
     #[inline(always)]
     fn c_f32(v: f32) -> Self {
         v
+    }
+    #[inline(always)]
+    fn fraction(self) -> Self {
+        sin_cos::fraction_f32(self)
     }
     #[inline]
     fn scale(self, k: f32) -> Self {

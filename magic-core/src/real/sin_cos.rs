@@ -20,10 +20,17 @@ pub const SIN_COS_TURN_MAX_ERROR_F64: f64 = 2.5e-16;
 /// measured (4 001 phases), 0.8 ε of f32; bounded here by 1.5e-7 (1.6× the measurement).
 pub const SIN_COS_TURN_MAX_ERROR_F32: f64 = 1.5e-7;
 
+/// `x − ⌊x⌋` in `R`, exactly, for |x| < 2³¹ ([`Real::fraction`]: by [`fraction_by_powers`], or
+/// for `f32` by [`fraction_f32`], the same value).
+#[inline(always)]
+pub fn fraction<R: Real>(x: R) -> R {
+    x.fraction()
+}
+
 /// `x − ⌊x⌋` in `R`, exactly, by subtracting powers of two (Sterbenz: each subtraction is exact),
 /// for |x| < 2³¹: no conversion to an integer, which in f32 would go through f64 (soft-float on
 /// the board).
-pub fn fraction<R: Real>(x: R) -> R {
+pub fn fraction_by_powers<R: Real>(x: R) -> R {
     let neg = x < R::zero();
     let mut f = if neg { -x } else { x };
     for k in (0..31).rev() {
@@ -34,6 +41,26 @@ pub fn fraction<R: Real>(x: R) -> R {
     }
     if neg && f > R::zero() {
         R::one() - f
+    } else {
+        f
+    }
+}
+
+/// [`fraction_by_powers`] for `f32`, bit for bit, by one conversion to an integer where the
+/// powers of two would subtract ⌊|x|⌋, that is for |x| < 2³¹ (NaN and larger values take the
+/// powers): the truncation of such an `f32` is exact, and so is the difference (Sterbenz again).
+/// Zeros keep their sign as there.
+#[inline]
+pub fn fraction_f32(x: f32) -> f32 {
+    let neg = x < 0.0;
+    let f = if neg { -x } else { x };
+    let small = f < 2_147_483_648.0; // (false for NaN)
+    if !small {
+        return fraction_by_powers(x);
+    }
+    let f = f - (f as u32) as f32;
+    if neg && f > 0.0 {
+        1.0 - f
     } else {
         f
     }
@@ -210,6 +237,41 @@ mod tests {
             9.99999999999929872243e-1,
         ),
     ];
+
+    /// The conversion of `fraction_f32` against the powers of two, bit for bit: zeros of both
+    /// signs, NaN, infinities, the edges around 2³¹, and a sweep over all exponents.
+    #[test]
+    fn fraction_f32_is_fraction_by_powers() {
+        let mut xs = std::vec![
+            0.0f32,
+            -0.0,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN_POSITIVE,
+            2_147_483_648.0,
+            2_147_483_520.0,
+            4_294_967_296.0,
+            16_777_217.0,
+            8_388_608.5,
+        ];
+        let mut bits = 0x0000_0001u32;
+        while bits < 0x7F80_0000 {
+            xs.push(f32::from_bits(bits));
+            bits = bits.wrapping_add(0x0000_3F1D);
+        }
+        for x in xs.clone() {
+            xs.push(-x);
+        }
+        for x in xs {
+            let (a, b) = (fraction_f32(x), fraction_by_powers(x));
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "{x:e}: {a:e} vs {b:e}"
+            );
+        }
+    }
 
     #[test]
     fn fractions_of_a_year() {
