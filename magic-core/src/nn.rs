@@ -151,7 +151,11 @@ impl Layer<'_> {
         if !w_scale.iter().all(ok_scale) {
             return Err(LayerFault::WeightScale);
         }
-        if w.contains(&0x80) {
+        // (A plain loop, not `contains`: its word-at-a-time search is 186 bytes of the board's
+        // flash, for a check made once per model.)
+        #[allow(clippy::manual_contains)]
+        let minus_128 = w.iter().any(|&b| b == 0x80);
+        if minus_128 {
             return Err(LayerFault::WeightMinus128);
         }
         if shift.iter().any(|&s| !(-30..=30).contains(&(s as i8))) {
