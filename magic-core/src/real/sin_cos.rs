@@ -28,8 +28,8 @@ pub fn fraction<R: Real>(x: R) -> R {
 }
 
 /// `x − ⌊x⌋` in `R`, exactly, by subtracting powers of two (Sterbenz: each subtraction is exact),
-/// for |x| < 2³¹: no conversion to an integer, which in f32 would go through f64 (soft-float on
-/// the board).
+/// for |x| < 2³¹: no conversion to an integer, which for a generic `R` would go through `f64`
+/// (soft-float on the board; `f32` converts directly, [`fraction_f32`]).
 pub fn fraction_by_powers<R: Real>(x: R) -> R {
     let neg = x < R::zero();
     let mut f = if neg { -x } else { x };
@@ -254,7 +254,7 @@ mod tests {
             2_147_483_520.0,
             4_294_967_296.0,
             16_777_217.0,
-            8_388_608.5,
+            8_388_607.5,
         ];
         let mut bits = 0x0000_0001u32;
         while bits < 0x7F80_0000 {
