@@ -263,3 +263,45 @@ fn packed_int8_path_is_bit_identical_to_the_reference() {
         }
     }
 }
+
+#[test]
+fn requantize_packed_is_requantize_then_pack_i8_pairs() {
+    // `requantize_packed` writes the packed layout itself (on the accumulators, sparing an int8
+    // buffer): it must equal requantising each value and packing with `pack_i8_pairs`, for
+    // every length (whole groups of four and each tail) and both floors.
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    for n in 0..=13usize {
+        for relu in [false, true] {
+            for _ in 0..50 {
+                let acc: std::vec::Vec<i32> = (0..n).map(|_| next() as i32 >> 8).collect();
+                let bias: std::vec::Vec<u8> = (0..n)
+                    .flat_map(|_| ((next() as i32) >> 12).to_le_bytes())
+                    .collect();
+                let mult: std::vec::Vec<u8> = (0..n)
+                    .flat_map(|_| (0x4000_0000 + (next() % 0x3FFF_FFFF) as i32).to_le_bytes())
+                    .collect();
+                let shift: std::vec::Vec<u8> = (0..n).map(|_| (next() % 40) as u8).collect();
+                let floor = if relu { 0 } else { -127 };
+                let q: std::vec::Vec<i8> = (0..n)
+                    .map(|i| {
+                        let b = i32::from_le_bytes(bias[4 * i..4 * i + 4].try_into().unwrap());
+                        let m = i32::from_le_bytes(mult[4 * i..4 * i + 4].try_into().unwrap());
+                        requantize_floor(acc[i].saturating_add(b), m, shift[i] as i8, floor)
+                    })
+                    .collect();
+                let words = 2 * n.div_ceil(4);
+                let mut want = std::vec![0u32; words];
+                crate::quant::layout::pack_i8_pairs(&q, &mut want);
+                let (mut got, mut a) = (std::vec![0u32; words], acc.clone());
+                requantize_packed(&mut a, &bias, &mult, &shift, relu, &mut got);
+                assert_eq!(got, want, "n {n}, relu {relu}, acc {acc:?}");
+            }
+        }
+    }
+}
