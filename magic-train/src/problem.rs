@@ -9,7 +9,7 @@
 //! tangent space each), and its families are typed against it, so pairing a family with the
 //! wrong problem does not compile. Adding a problem is one new module implementing this trait.
 
-use crate::analysis::{Analysis, AnalysisOptions, DynFamily};
+use crate::analysis::{Analysis, AnalysisOptions, Candidate, DynFamily};
 use crate::data::{Dataset, SplitName};
 use crate::model::OwnedEffect;
 use crate::physics::Physics;
@@ -84,6 +84,9 @@ pub trait Problem: Sync {
     fn residuals(&self, model: &Model<'_>, opts: &AnalysisOptions) -> Result<Self::Residuals>;
     /// The effect families that can be looked for, in report order.
     fn families(&self) -> Vec<Box<dyn DynFamily<Self::Residuals>>>;
+    /// Marks the candidates a higher-ranked one accounts for (`effects` ranked, best first) as
+    /// not significant, with the reason: one signal two families see. None by default.
+    fn reconcile(&self, _res: &Self::Residuals, _effects: &mut [Candidate]) {}
     /// What the analysis reports about the residuals themselves (JSON) and its one-line summary.
     fn describe_residuals(&self, res: &Self::Residuals) -> (serde_json::Value, String);
     /// Figures of an analysis (PNG files into `dir`).

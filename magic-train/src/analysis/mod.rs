@@ -189,6 +189,7 @@ pub fn analyse<P: Problem + ?Sized>(
         .map(|f| f.assess(&res, opts))
         .collect::<Result<Vec<_>>>()?;
     effects.sort_by(|a, b| b.excess().total_cmp(&a.excess()));
+    problem.reconcile(&res, &mut effects);
     let (residuals, summary) = problem.describe_residuals(&res);
     Ok((
         Analysis {

@@ -23,7 +23,7 @@ pub use bounds::SourceBounds;
 pub use physics::MogiPhysics;
 pub use residuals::GnssResiduals;
 
-use crate::analysis::{Analysis, AnalysisOptions, DynFamily};
+use crate::analysis::{Analysis, AnalysisOptions, Candidate, DynFamily};
 use crate::data::{Dataset, SplitName};
 use crate::model::{intern, OwnedEffect};
 use crate::physics::Physics;
@@ -275,6 +275,10 @@ impl Problem for GnssProblem {
     }
     fn families(&self) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
         families::all()
+    }
+    /// A step at a higher-ranked lasting source's onset is that onset ([`families::onset`]).
+    fn reconcile(&self, res: &GnssResiduals, effects: &mut [Candidate]) {
+        families::onset::mark_onsets(&res.ctx.network, effects);
     }
     fn describe_residuals(&self, res: &GnssResiduals) -> (serde_json::Value, String) {
         res.describe()

@@ -11,6 +11,7 @@ pub mod drift;
 pub mod elevation;
 pub mod lasting_source;
 pub mod latent;
+pub mod onset;
 pub mod seasonal;
 pub mod second_source;
 pub mod step;

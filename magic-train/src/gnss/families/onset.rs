@@ -1,0 +1,202 @@
+//! A step that is a lasting source's onset: one signal two families see.
+//!
+//! A lasting deflation begins as a jump at its nearest station, so the step scan finds it there
+//! too, and the step is then significant beside the source it belongs to. A significant step is
+//! taken for a significant `lasting_source`'s onset — no longer significant, and the reason
+//! said — when the source ranks above it, the step's epoch lies within the source's change
+//! (onset to end, ± [`ONSET_DAYS`]) and the step's offset points within [`MAX_ANGLE_DEG`] of the
+//! source's displacement at the station. A step ranked above the source, at another time or
+//! across its field stays: one station's jump cannot stand for a source, and a source is not
+//! dismissed for a station's jump.
+
+use crate::analysis::Candidate;
+use crate::gnss::Network;
+use crate::model::OwnedEffect;
+use magic_core::mogi;
+
+/// Days either side of a lasting source's change within which a step counts as its onset: the
+/// spacing of the onset scan ([`super::lasting_source::SCAN_SPACING`]), which places the onset
+/// to that many days.
+pub const ONSET_DAYS: f64 = super::lasting_source::SCAN_SPACING as f64;
+/// Largest angle (degrees) between a step's offset and the source's displacement at its station.
+pub const MAX_ANGLE_DEG: f64 = 45.0;
+
+/// What of a lasting source the rule needs: where it is, when it changes, which way.
+struct Change {
+    pos: [f64; 3],
+    start: f64,
+    end: f64,
+    sign: f64,
+}
+
+impl Change {
+    fn of(c: &Candidate) -> Option<Change> {
+        let Some(OwnedEffect::SecondSource {
+            x_km,
+            y_km,
+            depth_km,
+        }) = c.effect
+        else {
+            return None;
+        };
+        let day = |k: &str| {
+            c.params[k]
+                .as_str()
+                .and_then(magic_core::time::parse_date)
+                .map(|d| d as f64)
+        };
+        let dv = c.params["peak_dv_1e6m3"].as_f64()?;
+        Some(Change {
+            pos: [x_km.into(), y_km.into(), depth_km.into()],
+            start: day("start")?,
+            end: day("end")?,
+            sign: if dv < 0.0 { -1.0 } else { 1.0 },
+        })
+    }
+}
+
+/// Why the step `(station, epoch, offset)` is the onset of `change`, if it is.
+fn onset_of(
+    network: &Network,
+    change: &Change,
+    station: usize,
+    epoch: f64,
+    offset: [f32; 3],
+) -> Option<String> {
+    let stations = &network.stations;
+    let ns = stations.len();
+    if station >= ns || epoch < change.start - ONSET_DAYS || epoch > change.end + ONSET_DAYS {
+        return None;
+    }
+    let [x, y, d] = change.pos;
+    let mut u = vec![0.0; 3 * ns];
+    mogi::field(stations, &[x, y, d, change.sign], &mut u).ok()?;
+    let at: [f64; 3] = core::array::from_fn(|k| u[k * ns + station]);
+    let o = offset.map(f64::from);
+    let dot: f64 = at.iter().zip(&o).map(|(a, b)| a * b).sum();
+    let norms =
+        at.iter().map(|v| v * v).sum::<f64>().sqrt() * o.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let angle = (dot / norms).clamp(-1.0, 1.0).acos().to_degrees();
+    (angle <= MAX_ANGLE_DEG).then(|| {
+        format!(
+            "the onset of the lasting_source ranked above it (offset {angle:.0}° from its \
+             displacement at {}, epoch within its change ± {ONSET_DAYS:.0} days)",
+            network.names[station]
+        )
+    })
+}
+
+/// Marks each significant step that is the onset of a significant `lasting_source` ranked above
+/// it (`effects` ranked, best first) as not significant, with the reason.
+pub fn mark_onsets(network: &Network, effects: &mut [Candidate]) {
+    for i in 0..effects.len() {
+        let c = &effects[i];
+        let Some(OwnedEffect::Step {
+            station,
+            epoch_day,
+            offset_mm,
+        }) = c.effect
+        else {
+            continue;
+        };
+        if c.family != "step" || !c.significant || c.rejected.is_some() {
+            continue;
+        }
+        let why = effects[..i]
+            .iter()
+            .filter(|s| s.family == "lasting_source" && s.significant && s.rejected.is_none())
+            .filter(|s| s.excess() > c.excess())
+            .filter_map(Change::of)
+            .find_map(|ch| onset_of(network, &ch, station.into(), epoch_day.into(), offset_mm));
+        if let Some(why) = why {
+            effects[i].significant = false;
+            effects[i].rejected = Some(why);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use magic_core::mogi::Station;
+    use serde_json::json;
+
+    /// Three stations in a row; a deflation under the first.
+    fn network() -> Network {
+        let at = |x_km: f64| Station {
+            x_km,
+            y_km: 0.0,
+            z_km: 0.0,
+        };
+        Network {
+            names: vec!["A".into(), "B".into(), "C".into()],
+            stations: vec![at(0.0), at(5.0), at(10.0)],
+        }
+    }
+
+    fn lasting(score: f64) -> Candidate {
+        let params = json!({"x_km": 1.0, "y_km": 0.0, "depth_km": 3.0,
+            "start": "2014-01-01", "end": "2014-03-01", "peak_dv_1e6m3": -1.0});
+        let effect = OwnedEffect::SecondSource {
+            x_km: 1.0,
+            y_km: 0.0,
+            depth_km: 3.0,
+        };
+        significant("lasting_source", score, params, effect)
+    }
+
+    fn step(score: f64, station: u16, date: &str, offset_mm: [f32; 3]) -> Candidate {
+        let epoch_day = magic_core::time::parse_date(date).unwrap() as f32;
+        let effect = OwnedEffect::Step {
+            station,
+            epoch_day,
+            offset_mm,
+        };
+        significant("step", score, json!({}), effect)
+    }
+
+    fn significant(
+        family: &str,
+        score: f64,
+        params: serde_json::Value,
+        e: OwnedEffect,
+    ) -> Candidate {
+        let noise = vec![0.001, 0.002, 0.0015, 0.001, 0.002];
+        let c = Candidate::from_scores(family, score, noise, 0.95, params, Some(e));
+        assert!(c.significant);
+        c
+    }
+
+    /// Station A, 1 km west of a deflation 3 km deep, moves east (towards it) and down.
+    const TOWARDS: [f32; 3] = [2.0, 0.0, -5.0];
+
+    #[test]
+    fn a_step_along_the_source_at_its_onset_is_the_onset() {
+        let mut e = vec![lasting(0.05), step(0.03, 0, "2013-12-20", TOWARDS)];
+        mark_onsets(&network(), &mut e);
+        assert!(!e[1].significant, "{:?}", e[1]);
+        assert!(e[1].rejected.as_deref().unwrap().contains("onset"));
+        assert!(e[0].significant && e[0].rejected.is_none());
+    }
+
+    #[test]
+    fn a_step_ranked_above_elsewhere_or_across_stays() {
+        let cases = [
+            // Ranked above the source.
+            vec![step(0.06, 0, "2014-02-01", TOWARDS), lasting(0.05)],
+            // More than ONSET_DAYS before the change, or after it.
+            vec![lasting(0.05), step(0.03, 0, "2013-11-15", TOWARDS)],
+            vec![lasting(0.05), step(0.03, 0, "2014-04-15", TOWARDS)],
+            // Across the source's displacement at the station, or against it.
+            vec![lasting(0.05), step(0.03, 0, "2014-02-01", [5.0, 0.0, 2.0])],
+            vec![lasting(0.05), step(0.03, 0, "2014-02-01", [-2.0, 0.0, 5.0])],
+        ];
+        for mut e in cases {
+            let before: Vec<bool> = e.iter().map(|c| c.significant).collect();
+            mark_onsets(&network(), &mut e);
+            let after: Vec<bool> = e.iter().map(|c| c.significant).collect();
+            assert_eq!(before, after, "{e:?}");
+            assert!(e.iter().all(|c| c.rejected.is_none()));
+        }
+    }
+}
