@@ -216,11 +216,12 @@ impl Family<GnssResiduals> for LastingSource {
             rng,
         ))
     }
-    /// Position; onset (the scanned epoch) and end of the change (the first day on which the
-    /// daily volume change, 30-day running mean, has gone 90 % of the way from its mean before
-    /// the onset to its mean after); and the change of volume beyond what moving the main
-    /// source mimics (`peak_dv_1e6m3`: the projected pattern's daily amplitude, mean after less
-    /// mean before, 10⁶ m³).
+    /// Position; onset (the scanned epoch: for a change that builds over months, near its
+    /// middle), start and end of the change (the day after the last one before the onset on
+    /// which the daily volume change, 30-day running mean, had gone at most 10 % of the way from
+    /// its mean before the onset to its mean after; the first on which it has gone 90 %); and
+    /// the change of volume beyond what moving the main source mimics (`peak_dv_1e6m3`: the
+    /// projected pattern's daily amplitude, mean after less mean before, 10⁶ m³).
     fn params(&self, res: &GnssResiduals, fit: &LastingFit) -> serde_json::Value {
         let g = pattern(res, fit.pos);
         let dv = latent::daily_amplitude(&res.fit.r, res.nc(), &g);
@@ -228,9 +229,9 @@ impl Family<GnssResiduals> for LastingSource {
         let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len().max(1) as f64;
         let (before, after) = (mean(&dv[..e]), mean(&dv[e..]));
         let smooth = |t: usize| mean(&dv[t.saturating_sub(15)..(t + 16).min(n)]);
-        let done = (e..n)
-            .find(|&t| (smooth(t) - before) / (after - before) >= 0.9)
-            .unwrap_or(e);
+        let gone = |t: usize| (smooth(t) - before) / (after - before);
+        let begun = (0..e).rev().find(|&t| gone(t) <= 0.1).map_or(e, |t| t + 1);
+        let done = (e..n).find(|&t| gone(t) >= 0.9).unwrap_or(e);
         let date = |i: usize| {
             res.fit
                 .days
@@ -239,7 +240,7 @@ impl Family<GnssResiduals> for LastingSource {
         };
         json!({
             "x_km": round3(fit.pos[0]), "y_km": round3(fit.pos[1]), "depth_km": round3(fit.pos[2]),
-            "start": date(e), "end": date(done),
+            "onset": date(e), "start": date(begun), "end": date(done),
             "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
         })
     }

@@ -4,7 +4,7 @@
 //! too, and the step is then significant beside the source it belongs to. A significant step is
 //! taken for a significant `lasting_source`'s onset — no longer significant, and the reason
 //! said — when the source ranks above it, the step's epoch lies within the source's change
-//! (onset to end, ± [`ONSET_DAYS`]) and the step's offset points within [`MAX_ANGLE_DEG`] of the
+//! (its scanned onset to its end, ± [`ONSET_DAYS`]) and the step's offset points within [`MAX_ANGLE_DEG`] of the
 //! source's displacement at the station. A step ranked above the source, at another time or
 //! across its field stays: one station's jump cannot stand for a source, and a source is not
 //! dismissed for a station's jump.
@@ -24,7 +24,7 @@ pub const MAX_ANGLE_DEG: f64 = 45.0;
 /// What of a lasting source the rule needs: where it is, when it changes, which way.
 struct Change {
     pos: [f64; 3],
-    start: f64,
+    onset: f64,
     end: f64,
     sign: f64,
 }
@@ -48,7 +48,7 @@ impl Change {
         let dv = c.params["peak_dv_1e6m3"].as_f64()?;
         Some(Change {
             pos: [x_km.into(), y_km.into(), depth_km.into()],
-            start: day("start")?,
+            onset: day("onset")?,
             end: day("end")?,
             sign: if dv < 0.0 { -1.0 } else { 1.0 },
         })
@@ -65,7 +65,7 @@ fn onset_of(
 ) -> Option<String> {
     let stations = &network.stations;
     let ns = stations.len();
-    if station >= ns || epoch < change.start - ONSET_DAYS || epoch > change.end + ONSET_DAYS {
+    if station >= ns || epoch < change.onset - ONSET_DAYS || epoch > change.end + ONSET_DAYS {
         return None;
     }
     let [x, y, d] = change.pos;
@@ -136,7 +136,7 @@ mod tests {
 
     fn lasting(score: f64) -> Candidate {
         let params = json!({"x_km": 1.0, "y_km": 0.0, "depth_km": 3.0,
-            "start": "2014-01-01", "end": "2014-03-01", "peak_dv_1e6m3": -1.0});
+            "onset": "2014-01-01", "start": "2013-12-01", "end": "2014-03-01", "peak_dv_1e6m3": -1.0});
         let effect = OwnedEffect::SecondSource {
             x_km: 1.0,
             y_km: 0.0,
