@@ -3,11 +3,11 @@
 //! A lasting deflation begins as a jump at its nearest station, so the step scan finds it there
 //! too, and the step is then significant beside the source it belongs to. A significant step is
 //! taken for a significant `lasting_source`'s onset — no longer significant, and the reason
-//! said — when the source ranks above it, the step's epoch lies within the source's change
-//! (its scanned onset to its end, ± [`ONSET_DAYS`]) and the step's offset points within [`MAX_ANGLE_DEG`] of the
-//! source's displacement at the station. A step ranked above the source, at another time or
-//! across its field stays: one station's jump cannot stand for a source, and a source is not
-//! dismissed for a station's jump.
+//! said — when the source ranks above it, the step's epoch lies within the source's change (its
+//! scanned onset to its end, ± [`ONSET_DAYS`]) and the step's offset points within
+//! [`MAX_ANGLE_DEG`] of the source's displacement at the station. A step ranked above the
+//! source, at another time or across its field stays: one station's jump cannot stand for a
+//! source, and a source is not dismissed for a station's jump.
 
 use crate::analysis::Candidate;
 use crate::gnss::Network;
@@ -81,7 +81,10 @@ fn onset_of(
         format!(
             "the onset of the lasting_source ranked above it (offset {angle:.0}° from its \
              displacement at {}, epoch within its change ± {ONSET_DAYS:.0} days)",
-            network.names[station]
+            network
+                .names
+                .get(station)
+                .map_or("its station", String::as_str)
         )
     })
 }
