@@ -13,6 +13,7 @@ use crate::analysis::Candidate;
 use crate::gnss::Network;
 use crate::model::OwnedEffect;
 use magic_core::mogi;
+use nalgebra::Vector3;
 
 /// Days either side of a lasting source's change within which a step counts as its onset: the
 /// spacing of the onset scan ([`super::lasting_source::SCAN_SPACING`]), which places the onset
@@ -63,21 +64,16 @@ fn onset_of(
     epoch: f64,
     offset: [f32; 3],
 ) -> Option<String> {
-    let stations = &network.stations;
-    let ns = stations.len();
-    if station >= ns || epoch < change.onset - ONSET_DAYS || epoch > change.end + ONSET_DAYS {
+    if epoch < change.onset - ONSET_DAYS || epoch > change.end + ONSET_DAYS {
         return None;
     }
+    let here = core::slice::from_ref(network.stations.get(station)?);
     let [x, y, d] = change.pos;
-    let mut u = vec![0.0; 3 * ns];
-    mogi::field(stations, &[x, y, d, change.sign], &mut u).ok()?;
-    let at: [f64; 3] = core::array::from_fn(|k| u[k * ns + station]);
-    let o = offset.map(f64::from);
-    let dot: f64 = at.iter().zip(&o).map(|(a, b)| a * b).sum();
-    let norms =
-        at.iter().map(|v| v * v).sum::<f64>().sqrt() * o.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let angle = (dot / norms).clamp(-1.0, 1.0).acos().to_degrees();
-    (angle <= MAX_ANGLE_DEG).then(|| {
+    let mut at = [0.0; 3];
+    mogi::field(here, &[x, y, d, change.sign], &mut at).ok()?;
+    let (at, o) = (Vector3::from(at), Vector3::from(offset.map(f64::from)));
+    let angle = at.angle(&o).to_degrees();
+    (o.norm() > 0.0 && angle <= MAX_ANGLE_DEG).then(|| {
         format!(
             "the onset of the lasting_source ranked above it (offset {angle:.0}° from its \
              displacement at {}, epoch within its change ± {ONSET_DAYS:.0} days)",
@@ -102,7 +98,7 @@ pub fn mark_onsets(network: &Network, effects: &mut [Candidate]) {
         else {
             continue;
         };
-        if c.family != "step" || !c.significant || c.rejected.is_some() {
+        if !c.significant || c.rejected.is_some() {
             continue;
         }
         let why = effects[..i]
