@@ -11,6 +11,7 @@
 //! statistic [`stands_out`] of its surrogates' by a like rule and the score exceeds chance: a
 //! clear local effect is worth its term though it explains little of the whole network.
 
+use super::Rejection;
 use crate::model::OwnedEffect;
 use crate::numerics::{quantile, sd};
 use serde_json::json;
@@ -47,7 +48,7 @@ pub struct Candidate {
     /// [`Family::statistic`](super::Family::statistic)).
     pub statistic: Option<(f64, Vec<f64>)>,
     /// Why the fit cannot count as a discovery whatever its score, if it cannot.
-    pub rejected: Option<String>,
+    pub rejected: Option<Rejection>,
     /// Standard deviations of the key parameters (parametric bootstrap; significant candidates
     /// only).
     pub uncertainty: Vec<ParamSd>,

@@ -9,7 +9,7 @@
 //!
 //! [`Effect`]: magic_core::effects::Effect
 
-use super::{stands_out, AnalysisOptions, Candidate, ParamSd};
+use super::{stands_out, AnalysisOptions, Candidate, ParamSd, Rejection};
 use crate::model::OwnedEffect;
 use anyhow::Result;
 use rand::rngs::StdRng;
@@ -36,7 +36,7 @@ pub trait Family<R>: Sync {
     fn declare(&self, res: &R, fit: &Self::Fit) -> Option<OwnedEffect>;
     /// Why the fit cannot count as a discovery whatever its score (a position on the bound of
     /// its search grid is not a discovery), if it cannot.
-    fn reject(&self, _res: &R, _fit: &Self::Fit) -> Option<String> {
+    fn reject(&self, _res: &R, _fit: &Self::Fit) -> Option<Rejection> {
         None
     }
     /// A detection statistic of the fit (larger: stronger) that must also exceed every
@@ -121,9 +121,10 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
             if c.rejected.is_none() {
                 if stat <= top {
                     c.significant = false;
-                    c.rejected = Some(format!(
-                        "detection statistic {stat:.3} not above the surrogates' largest, {top:.3}"
-                    ));
+                    c.rejected = Some(Rejection::StatisticNotAbove {
+                        statistic: stat,
+                        largest: top,
+                    });
                 } else if c.excess() > 0.0 {
                     c.significant |= stands_out(stat, &of_surrogates);
                 }

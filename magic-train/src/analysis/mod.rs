@@ -10,11 +10,13 @@
 mod candidate;
 mod family;
 pub mod projection;
+mod rejection;
 pub mod score;
 pub mod surrogate;
 
 pub use candidate::{stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
 pub use family::{surrogate_seeds, DynFamily, Family};
+pub use rejection::{Rejection, Side};
 
 use crate::data::SplitName;
 use crate::problem::Problem;

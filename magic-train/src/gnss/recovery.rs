@@ -11,7 +11,7 @@
 
 use super::synth::truth::{background, injected, Injected};
 use super::synth::Spec;
-use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate};
+use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate, Rejection};
 use crate::numerics::median;
 use crate::train::{train_model, ModelKind, TrainConfig};
 use anyhow::Result;
@@ -42,7 +42,7 @@ pub struct Found {
     pub detail: String,
     /// Why its family's candidate cannot count as a discovery, if a rule rejected it (e.g. on
     /// the bound of its search grid).
-    pub rejected: Option<String>,
+    pub rejected: Option<Rejection>,
 }
 
 impl Found {

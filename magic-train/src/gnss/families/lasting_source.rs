@@ -22,7 +22,7 @@ use super::second_source::{
     translations, with_translations,
 };
 use crate::analysis::score::weighted_gain;
-use crate::analysis::Family;
+use crate::analysis::{Family, Rejection};
 use crate::gnss::residuals::SourceGrid;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
@@ -244,7 +244,7 @@ impl Family<GnssResiduals> for LastingSource {
             "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
         })
     }
-    fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<String> {
+    fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
         on_bound(res, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {

@@ -9,7 +9,7 @@
 //! source, at another time or across its field stays: one station's jump cannot stand for a
 //! source, and a source is not dismissed for a station's jump.
 
-use crate::analysis::Candidate;
+use crate::analysis::{Candidate, Rejection};
 use crate::gnss::Network;
 use crate::model::OwnedEffect;
 use magic_core::mogi;
@@ -63,7 +63,7 @@ fn onset_of(
     station: usize,
     epoch: f64,
     offset: [f32; 3],
-) -> Option<String> {
+) -> Option<Rejection> {
     if epoch < change.onset - ONSET_DAYS || epoch > change.end + ONSET_DAYS {
         return None;
     }
@@ -74,14 +74,14 @@ fn onset_of(
     let (at, o) = (Vector3::from(at), Vector3::from(offset.map(f64::from)));
     let angle = at.angle(&o).to_degrees();
     (o.norm() > 0.0 && angle <= MAX_ANGLE_DEG).then(|| {
-        format!(
+        Rejection::PartOf(format!(
             "the onset of the lasting_source ranked above it (offset {angle:.0}° from its \
              displacement at {}, epoch within its change ± {ONSET_DAYS:.0} days)",
             network
                 .names
                 .get(station)
                 .map_or("its station", String::as_str)
-        )
+        ))
     })
 }
 
@@ -174,7 +174,11 @@ mod tests {
         let mut e = vec![lasting(0.05), step(0.03, 0, "2013-12-20", TOWARDS)];
         mark_onsets(&network(), &mut e);
         assert!(!e[1].significant, "{:?}", e[1]);
-        assert!(e[1].rejected.as_deref().unwrap().contains("onset"));
+        let why = &e[1].rejected;
+        assert!(
+            matches!(why, Some(Rejection::PartOf(w)) if w.contains("onset")),
+            "{why:?}"
+        );
         assert!(e[0].significant && e[0].rejected.is_none());
     }
 

@@ -20,7 +20,7 @@
 
 use super::latent::{self, round3, Cross};
 use crate::analysis::projection::{orthonormal, project, scaled};
-use crate::analysis::Family;
+use crate::analysis::{Family, Rejection};
 use crate::gnss::residuals::{translation, SourceGrid};
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
@@ -266,63 +266,21 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
 }
 
 /// Why a source at `pos` cannot count as a discovery: on the bound of the search grid.
-pub(super) fn on_bound(res: &GnssResiduals, pos: [f64; 3]) -> Option<String> {
+pub(super) fn on_bound(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
     let (lo, hi) = bounding_box(&grid(res).points);
     (0..3)
         .find(|&k| pos[k] - lo[k] < BOUND_TOLERANCE_KM || hi[k] - pos[k] < BOUND_TOLERANCE_KM)
-        .map(|k| bound_reason(k, pos[k], lo[k], hi[k]))
+        .map(|k| Rejection::OnBound {
+            coordinate: COORDINATES[k],
+            unit: "km",
+            value: pos[k],
+            lo: lo[k],
+            hi: hi[k],
+        })
 }
 
-/// The coordinates' names in [`on_bound`]'s reasons.
+/// The coordinates' names in [`on_bound`]'s rejections.
 const COORDINATES: [&str; 3] = ["x", "y", "depth"];
-/// How [`on_bound`]'s reasons begin.
-const BOUND_REASON: &str = "on the bound of the search grid (";
-
-/// The reason for a position on the bound of coordinate `k` (x, y, depth) at `v` in `[lo, hi]`.
-fn bound_reason(k: usize, v: f64, lo: f64, hi: f64) -> String {
-    format!(
-        "{BOUND_REASON}{} {v:.1} km in [{lo:.1}, {hi:.1}])",
-        COORDINATES[k]
-    )
-}
-
-/// Which bound of the search grid a source was rejected on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Bound {
-    /// The shallowest depth of the grid: a field concentrated on the nearest stations.
-    Shallowest,
-    /// The deepest depth: a field nearly uniform over the network.
-    Deepest,
-    /// A horizontal edge of the grid.
-    Edge,
-}
-
-/// The bound a rejection reason (a candidate's `rejected`) names, if it is the bound rule's
-/// ("on the bound of the search grid (…)", from the family's `reject`).
-///
-/// ```
-/// use magic_train::gnss::families::second_source::{bound_of, Bound};
-/// let why = "on the bound of the search grid (depth 2.0 km in [2.0, 20.0])";
-/// assert_eq!(bound_of(why), Some(Bound::Shallowest));
-/// assert_eq!(bound_of("detection statistic 9.1 not above the surrogates' largest, 12.0"), None);
-/// ```
-pub fn bound_of(reason: &str) -> Option<Bound> {
-    let rest = reason.strip_prefix(BOUND_REASON)?;
-    let mut words = rest.split_whitespace();
-    let (name, v) = (words.next()?, words.next()?.parse::<f64>().ok()?);
-    let number = |w: Option<&str>| {
-        w?.trim_matches(|c| matches!(c, '[' | ']' | ',' | ')'))
-            .parse::<f64>()
-            .ok()
-    };
-    let _ = (words.next(), words.next()); // "km in"
-    let (lo, hi) = (number(words.next())?, number(words.next())?);
-    Some(match name {
-        "depth" if (v - lo).abs() <= (hi - v).abs() => Bound::Shallowest,
-        "depth" => Bound::Deepest,
-        _ => Bound::Edge,
-    })
-}
 
 /// A source's key parameters (what the bootstrap measures): its position.
 pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
@@ -418,7 +376,7 @@ impl Family<GnssResiduals> for SecondSource {
             "neighbour_days": fit.window,
         })
     }
-    fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<String> {
+    fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<Rejection> {
         on_bound(res, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
@@ -434,22 +392,5 @@ impl Family<GnssResiduals> for SecondSource {
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {
         declare_at(fit.pos, fit.score)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// [`bound_of`] reads back every reason [`on_bound`] writes.
-    #[test]
-    fn bound_reasons_read_back() {
-        let (lo, hi) = (GRID_DEPTHS[0], GRID_DEPTHS[GRID_DEPTHS.len() - 1]);
-        let read = |k, v, lo, hi| bound_of(&bound_reason(k, v, lo, hi));
-        assert_eq!(read(2, lo + 0.1, lo, hi), Some(Bound::Shallowest));
-        assert_eq!(read(2, hi, lo, hi), Some(Bound::Deepest));
-        assert_eq!(read(0, -9.0, -9.0, 10.0), Some(Bound::Edge));
-        assert_eq!(read(1, 9.875, -9.0, 10.0), Some(Bound::Edge));
-        assert_eq!(bound_of("not analysed"), None);
     }
 }

@@ -3,8 +3,28 @@
 //! scenario and noise model over the placements (`magic synth-check` prints the table).
 
 use super::{Found, Recovery};
-use crate::gnss::families::second_source::{bound_of, Bound};
+use crate::analysis::{Rejection, Side};
 use std::fmt::Write as _;
+
+/// Which bound of the search grid a source was rejected on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bound {
+    /// The shallowest depth of the grid: a field concentrated on the nearest stations.
+    Shallowest,
+    /// The deepest depth: a field nearly uniform over the network.
+    Deepest,
+    /// A horizontal edge of the grid.
+    Edge,
+}
+
+/// The bound of the grid `why` names, if the bound rule rejected the candidate.
+fn bound_of(why: &Rejection) -> Option<Bound> {
+    Some(match why.bound()? {
+        ("depth", Side::Low) => Bound::Shallowest,
+        ("depth", Side::High) => Bound::Deepest,
+        _ => Bound::Edge,
+    })
+}
 
 /// Why an injected effect was not found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,14 +105,14 @@ pub fn miss_table(rows: &[Recovery]) -> String {
 mod tests {
     use super::*;
 
-    fn found(significant: bool, params_ok: bool, rejected: Option<&str>) -> Found {
+    fn found(significant: bool, params_ok: bool, rejected: Option<Rejection>) -> Found {
         Found {
             family: "second_source".into(),
             significant,
             rank: Some(1),
             params_ok,
             detail: String::new(),
-            rejected: rejected.map(str::to_string),
+            rejected,
         }
     }
 
@@ -111,13 +131,23 @@ mod tests {
 
     #[test]
     fn each_miss_has_its_column() {
-        let shallow = "on the bound of the search grid (depth 2.0 km in [2.0, 20.0])";
+        let shallow = Rejection::OnBound {
+            coordinate: "depth",
+            unit: "km",
+            value: 2.0,
+            lo: 2.0,
+            hi: 20.0,
+        };
+        let stat = Rejection::StatisticNotAbove {
+            statistic: 1.0,
+            largest: 2.0,
+        };
         let rows = [
             row("train", found(true, true, None)),
             row("valid", found(false, true, Some(shallow))),
             row("test", found(false, true, None)),
             row("train", found(true, false, None)),
-            row("valid", found(false, false, Some("statistic not above"))),
+            row("valid", found(false, false, Some(stat))),
             row("test", found(false, false, None)),
         ];
         assert_eq!(miss(&rows[0].effects[0]), None);

@@ -1,0 +1,147 @@
+//! Why a fitted effect cannot count as a discovery whatever its score: one reason, kept as data
+//! so the tables can count what rejected it (which bound of a grid) and printed in words in the
+//! reports and the JSON.
+
+use std::fmt;
+
+/// Which side of its range a coordinate on the bound lies on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    /// The range's lower end.
+    Low,
+    /// Its upper end.
+    High,
+}
+
+/// Why a candidate cannot count as a discovery.
+///
+/// ```
+/// use magic_train::analysis::{Rejection, Side};
+/// let r = Rejection::OnBound { coordinate: "depth", unit: "km", value: 2.0, lo: 2.0, hi: 20.0 };
+/// assert_eq!(r.to_string(), "on the bound of the search grid (depth 2.0 km in [2.0, 20.0])");
+/// assert_eq!(r.bound(), Some(("depth", Side::Low)));
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub enum Rejection {
+    /// Its position on the bound of the search grid: a fit the grid stopped is not located.
+    OnBound {
+        /// The coordinate on its bound (`x`, `y`, `depth`).
+        coordinate: &'static str,
+        /// Its unit.
+        unit: &'static str,
+        /// Its value.
+        value: f64,
+        /// The grid's range of it.
+        lo: f64,
+        /// See `lo`.
+        hi: f64,
+    },
+    /// Its detection statistic not above every surrogate's
+    /// ([`Family::statistic`](super::Family::statistic)).
+    StatisticNotAbove {
+        /// The fit's statistic.
+        statistic: f64,
+        /// The surrogates' largest.
+        largest: f64,
+    },
+    /// Taken for part of another candidate's effect (a step at a lasting source's onset), in
+    /// words that name it ([`Problem::reconcile`](crate::problem::Problem::reconcile)).
+    PartOf(String),
+}
+
+impl Rejection {
+    /// The coordinate on its bound and the side of the range it is nearer, if the grid's bound
+    /// rejected it.
+    pub fn bound(&self) -> Option<(&'static str, Side)> {
+        match *self {
+            Rejection::OnBound {
+                coordinate,
+                value,
+                lo,
+                hi,
+                ..
+            } => Some((
+                coordinate,
+                if (value - lo).abs() <= (hi - value).abs() {
+                    Side::Low
+                } else {
+                    Side::High
+                },
+            )),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Rejection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Rejection::OnBound {
+                coordinate,
+                unit,
+                value,
+                lo,
+                hi,
+            } => write!(
+                f,
+                "on the bound of the search grid ({coordinate} {value:.1} {unit} in \
+                 [{lo:.1}, {hi:.1}])"
+            ),
+            Rejection::StatisticNotAbove { statistic, largest } => write!(
+                f,
+                "detection statistic {statistic:.3} not above the surrogates' largest, \
+                 {largest:.3}"
+            ),
+            Rejection::PartOf(why) => f.write_str(why),
+        }
+    }
+}
+
+/// Reported in words, as [`fmt::Display`] writes it.
+impl serde::Serialize for Rejection {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn depth(value: f64) -> Rejection {
+        Rejection::OnBound {
+            coordinate: "depth",
+            unit: "km",
+            value,
+            lo: 2.0,
+            hi: 20.0,
+        }
+    }
+
+    #[test]
+    fn a_bound_names_its_side() {
+        assert_eq!(depth(2.1).bound(), Some(("depth", Side::Low)));
+        assert_eq!(depth(19.9).bound(), Some(("depth", Side::High)));
+        let stat = Rejection::StatisticNotAbove {
+            statistic: 9.1,
+            largest: 12.0,
+        };
+        assert_eq!(stat.bound(), None);
+        assert_eq!(Rejection::PartOf("its onset".into()).bound(), None);
+    }
+
+    #[test]
+    fn words_and_json_agree() {
+        let stat = Rejection::StatisticNotAbove {
+            statistic: 9.1,
+            largest: 12.0,
+        };
+        let words = "detection statistic 9.100 not above the surrogates' largest, 12.000";
+        assert_eq!(stat.to_string(), words);
+        assert_eq!(serde_json::to_value(&stat).unwrap(), words);
+        assert_eq!(
+            serde_json::to_value(depth(19.9)).unwrap(),
+            "on the bound of the search grid (depth 19.9 km in [2.0, 20.0])"
+        );
+    }
+}
