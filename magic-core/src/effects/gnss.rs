@@ -3,7 +3,7 @@
 
 use super::Effect;
 use crate::mogi::{self, Network, Station};
-use crate::real::sin_cos::{fraction, sin_cos_turn};
+use crate::real::sin_cos::sin_cos_turn;
 use crate::{EffectFault, Error, Real};
 
 const YEAR_DAYS: f64 = 365.25;
@@ -132,7 +132,7 @@ impl Effect<'_> {
                 // The phase within the year and its sine and cosine, in R (see [`sin_cos_turn`];
                 // no f64 arithmetic on the board), the semiannual terms by the double-angle
                 // formulas.
-                let (sn, cs) = sin_cos_turn::<R>(fraction(t / R::c(YEAR_DAYS)));
+                let (sn, cs) = sin_cos_turn::<R>((t / R::c(YEAR_DAYS)).fraction());
                 let basis = [sn, cs, R::c(2.0) * sn * cs, cs * cs - sn * sn];
                 // The four terms written out: as a loop, the board's size-optimised build kept
                 // it (about 37 instructions per channel against about 20).

@@ -125,7 +125,8 @@ pub trait Real:
     fn c_f32(v: f32) -> Self {
         Self::c(v as f64)
     }
-    /// `self − ⌊self⌋`, exactly, by comparisons with powers of two ([`sin_cos::fraction`]);
+    /// `self − ⌊self⌋`, exactly, for |self| < 2³¹, by comparisons with powers of two
+    /// ([`sin_cos::fraction_by_powers`]);
     /// `f32` computes the same value from a conversion to an integer, which the Cortex-M4F does
     /// in one instruction (the powers of two cost it about 370 instructions per call).
     #[inline(always)]

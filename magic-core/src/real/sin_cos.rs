@@ -2,7 +2,7 @@
 //! seasonal terms of a GNSS model on the board, where libm's `sinf`/`cosf` would cost their f64
 //! argument reduction (soft-float on a Cortex-M4F, about 3 KB of flash) for this one use.
 //!
-//! The phase enters as a fraction of a turn ([`fraction`] of days / 365.25, exact), so no
+//! The phase enters as a fraction of a turn ([`Real::fraction`] of days / 365.25, exact), so no
 //! reduction by π is needed: the nearest quarter turn is taken out by comparisons and the rest,
 //! |x| ≤ π/4, goes through fixed Taylor polynomials. [`SIN_COS_TURN_MAX_ERROR_F64`] and
 //! [`SIN_COS_TURN_MAX_ERROR_F32`] bound the absolute error, checked in the tests against
@@ -19,13 +19,6 @@ pub const SIN_COS_TURN_MAX_ERROR_F64: f64 = 2.5e-16;
 /// Largest absolute error of [`sin_cos_turn`] in `f32`, for phases exact in `f32`: 9.4e-8
 /// measured (4 001 phases), 0.8 ε of f32; bounded here by 1.5e-7 (1.6× the measurement).
 pub const SIN_COS_TURN_MAX_ERROR_F32: f64 = 1.5e-7;
-
-/// `x − ⌊x⌋` in `R`, exactly, for |x| < 2³¹ ([`Real::fraction`]: by [`fraction_by_powers`], or
-/// for `f32` by [`fraction_f32`], the same value).
-#[inline(always)]
-pub fn fraction<R: Real>(x: R) -> R {
-    x.fraction()
-}
 
 /// `x − ⌊x⌋` in `R`, exactly, by subtracting powers of two (Sterbenz: each subtraction is exact),
 /// for |x| < 2³¹: no conversion to an integer, which for a generic `R` would go through `f64`
@@ -287,9 +280,9 @@ mod tests {
             1e6 + 0.5,
             16_777_215.0,
         ] {
-            assert_eq!(fraction(x), x - libm::floor(x), "{x}");
+            assert_eq!(x.fraction(), x - libm::floor(x), "{x}");
             let x32 = x as f32;
-            assert_eq!(fraction(x32), x32 - libm::floorf(x32), "{x}");
+            assert_eq!(x32.fraction(), x32 - libm::floorf(x32), "{x}");
         }
     }
 
