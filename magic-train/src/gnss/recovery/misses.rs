@@ -159,4 +159,24 @@ mod tests {
             "| second_source_near | paper | second_source | 6 | 1 | 1 | 0 | 0 | 1 | 1 | 1 | 1 |"
         );
     }
+
+    /// Each bound of the grid by its coordinate and the nearer end of its range (what the
+    /// removed string parser's test held for the reasons).
+    #[test]
+    fn bounds_by_coordinate_and_side() {
+        let on = |coordinate, value, lo, hi| {
+            bound_of(&Rejection::OnBound {
+                coordinate,
+                unit: "km",
+                value,
+                lo,
+                hi,
+            })
+        };
+        assert_eq!(on("depth", 2.1, 2.0, 20.0), Some(Bound::Shallowest));
+        assert_eq!(on("depth", 20.0, 2.0, 20.0), Some(Bound::Deepest));
+        assert_eq!(on("x", -9.0, -9.0, 10.0), Some(Bound::Edge));
+        assert_eq!(on("y", 9.875, -9.0, 10.0), Some(Bound::Edge));
+        assert_eq!(bound_of(&Rejection::PartOf("its onset".into())), None);
+    }
 }
