@@ -11,7 +11,9 @@
 //! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
 //! second source's grid, bound rule and refinement) whose pattern the network's offsets at some
 //! epoch follow best — mean over [`SCAN_DAYS`] days after less mean over those before, every
-//! [`SCAN_SPACING`] days, counting products of different stations only. Each is scored by
+//! [`SCAN_SPACING`] days, counting products of different stations only — and the best point at
+//! each of the few epochs where the offsets are largest, so that one change cannot hide another
+//! at a different time. Each is scored by
 //! predicting every station from the others ([`lasting_gain`]); the network translations are a
 //! nuisance there and are removed before the surrogates randomise each station's series, as for
 //! the second source.
@@ -149,8 +151,56 @@ pub fn lasting_gain(
     weighted_gain((a, b))
 }
 
-/// The candidates ([`offsets`], [`shared_offset`]: the best few distinct grid points, each
-/// refined at its epoch), the one with the largest [`lasting_gain`] kept.
+/// The candidates of a table of the statistic (`table[point][epoch]`, grid points `pts`) as
+/// `(statistic, point, epoch)`: the [`CANDIDATES`] best distinct points, each at its best
+/// epoch, then the best point at each of the [`CANDIDATES`] best epochs at least [`SCAN_DAYS`]
+/// apart (those not among the first).
+fn candidates(table: &[Vec<f64>], pts: &[[f64; 3]]) -> Vec<(f64, usize, usize)> {
+    let argmax = |v: &mut dyn Iterator<Item = (f64, usize)>| {
+        v.fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
+    };
+    let by_point: Vec<(f64, usize)> = table
+        .iter()
+        .map(|row| argmax(&mut row.iter().copied().zip(0..)))
+        .collect();
+    let firsts = by_point
+        .iter()
+        .enumerate()
+        .map(|(pi, s)| (s.0, pi))
+        .collect();
+    let mut out: Vec<(f64, usize, usize)> = distinct_best(firsts, pts, CANDIDATES)
+        .into_iter()
+        .map(|(v, pi)| (v, pi, by_point[pi].1))
+        .collect();
+    let n_epochs = table.first().map_or(0, Vec::len);
+    let mut by_epoch: Vec<(f64, usize, usize)> = (0..n_epochs)
+        .map(|k| {
+            let (v, pi) = argmax(&mut table.iter().map(|row| row[k]).zip(0..));
+            (v, pi, k)
+        })
+        .collect();
+    by_epoch.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let apart = SCAN_DAYS / SCAN_SPACING;
+    let mut epochs: Vec<usize> = Vec::new();
+    for (v, pi, k) in by_epoch {
+        if epochs.len() >= CANDIDATES {
+            break;
+        }
+        if epochs.iter().all(|&e| e.abs_diff(k) >= apart) {
+            epochs.push(k);
+            if !out.iter().any(|c| (c.1, c.2) == (pi, k)) {
+                out.push((v, pi, k));
+            }
+        }
+    }
+    out
+}
+
+/// The candidates ([`offsets`], [`shared_offset`]): the best few distinct grid points, each at
+/// its best epoch, and the best grid point at each of the best few distinct epochs (a change
+/// elsewhere in time — the leftovers of the main source's own episodes — must not hide one
+/// weaker at its onset); each refined at its epoch, the one with the largest [`lasting_gain`]
+/// kept.
 fn search(res: &GnssResiduals) -> LastingFit {
     let (ns, nc) = (res.ns(), res.nc());
     let d = offsets(&res.fit.r, nc);
@@ -159,23 +209,18 @@ fn search(res: &GnssResiduals) -> LastingFit {
         patterns,
         ..
     } = grid(res);
-    let mut best: Option<LastingFit> = None;
-    if d.is_empty() {
+    if d.is_empty() || pts.is_empty() {
         return LastingFit::default();
     }
-    let scored: Vec<(f64, usize)> = patterns
+    // Per grid point, the statistic at every scanned epoch.
+    let table: Vec<Vec<f64>> = patterns
         .par_iter()
-        .map(|g| {
-            d.iter()
-                .enumerate()
-                .map(|(k, (_, de))| (shared_offset(g, de, ns), k))
-                .fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
-        })
+        .map(|g| d.iter().map(|(_, de)| shared_offset(g, de, ns)).collect())
         .collect();
-    let candidates = scored.iter().enumerate().map(|(pi, s)| (s.0, pi)).collect();
     let ts = translations(res);
-    for (v, pi) in distinct_best(candidates, pts, CANDIDATES) {
-        let (onset, de) = &d[scored[pi].1];
+    let mut best: Option<LastingFit> = None;
+    for (v, pi, k) in candidates(&table, pts) {
+        let (onset, de) = &d[k];
         let pos = refine(res, pts, pts[pi], v, &|g| shared_offset(g, de, ns)).0;
         let gain = lasting_gain(&pattern(res, pos), &ts, &res.fit.r, nc, ns, *onset);
         // (The first candidate stands even without a gain: its position is still reported.)
@@ -366,5 +411,31 @@ mod tests {
             on_change > 20.0 * on_noise.max(1.0),
             "{on_change} vs {on_noise}"
         );
+    }
+
+    #[test]
+    fn candidates_hold_a_weaker_change_at_another_epoch() {
+        // Four points 3 km apart, 20 epochs: point 0 carries a large offset at epoch 15 (it and
+        // its neighbours peak there); point 3 a weaker one at epoch 4, ranked last of the points.
+        let pts = [
+            [0.0, 0.0, 3.0],
+            [3.0, 0.0, 3.0],
+            [6.0, 0.0, 3.0],
+            [9.0, 0.0, 3.0],
+        ];
+        let mut table = vec![vec![0.0; 20]; 4];
+        for (pi, v) in [10.0, 9.0, 8.0, 1.0].into_iter().enumerate() {
+            table[pi][15] = v;
+        }
+        table[3][4] = 5.0;
+        // Epoch 16, next to 15, is not a distinct epoch.
+        table[1][16] = 8.5;
+        let c = candidates(&table, &pts);
+        let firsts: Vec<(usize, usize)> = c[..CANDIDATES].iter().map(|c| (c.1, c.2)).collect();
+        assert_eq!(firsts, [(0, 15), (1, 15), (2, 15)], "{c:?}");
+        assert!(c.contains(&(5.0, 3, 4)), "{c:?}");
+        assert!(c.iter().all(|c| c.2 != 16), "{c:?}");
+        // No third epoch lies 6 scans (SCAN_DAYS) from both 15 and 4 in 20.
+        assert_eq!(c.len(), CANDIDATES + 1, "{c:?}");
     }
 }
