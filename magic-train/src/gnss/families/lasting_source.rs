@@ -151,17 +151,19 @@ pub fn lasting_gain(
     weighted_gain((a, b))
 }
 
+/// The largest `(value, index)` (the first of equals; `(f64::MIN, 0)` when empty).
+fn argmax(v: impl Iterator<Item = (f64, usize)>) -> (f64, usize) {
+    v.fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
+}
+
 /// The candidates of a table of the statistic (`table[point][epoch]`, grid points `pts`) as
 /// `(statistic, point, epoch)`: the [`CANDIDATES`] best distinct points, each at its best
 /// epoch, then the best point at each of the [`CANDIDATES`] best epochs at least [`SCAN_DAYS`]
 /// apart (those not among the first).
 fn candidates(table: &[Vec<f64>], pts: &[[f64; 3]]) -> Vec<(f64, usize, usize)> {
-    let argmax = |v: &mut dyn Iterator<Item = (f64, usize)>| {
-        v.fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
-    };
     let by_point: Vec<(f64, usize)> = table
         .iter()
-        .map(|row| argmax(&mut row.iter().copied().zip(0..)))
+        .map(|row| argmax(row.iter().copied().zip(0..)))
         .collect();
     let firsts = by_point
         .iter()
@@ -175,7 +177,7 @@ fn candidates(table: &[Vec<f64>], pts: &[[f64; 3]]) -> Vec<(f64, usize, usize)> 
     let n_epochs = table.first().map_or(0, Vec::len);
     let mut by_epoch: Vec<(f64, usize, usize)> = (0..n_epochs)
         .map(|k| {
-            let (v, pi) = argmax(&mut table.iter().map(|row| row[k]).zip(0..));
+            let (v, pi) = argmax(table.iter().map(|row| row[k]).zip(0..));
             (v, pi, k)
         })
         .collect();
