@@ -9,21 +9,18 @@
 //! in the other's chance.
 //!
 //! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
-//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule and refinement)
-//! whose pattern the network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days
-//! after less mean over those before, every [`SCAN_SPACING`] days, counting products of
-//! different stations only — and the best point at each of the few epochs where the offsets are
-//! largest, so that one change cannot hide another at a different time. Each is then placed at
-//! the depth where those offsets, in units of each channel's spread and standardised by the
-//! pattern's pairs of stations ([`shared_offset_standardised`]), peak: the locating statistic
-//! alone puts a source 3 km deep at about 5 km, with twice its ΔV. Each is scored by
+//! second source's grid, bound rule and refinement) whose pattern the network's offsets at some
+//! epoch follow best — mean over [`SCAN_DAYS`] days after less mean over those before, every
+//! [`SCAN_SPACING`] days, counting products of different stations only — and the best point at
+//! each of the few epochs where the offsets are largest, so that one change cannot hide another
+//! at a different time. Each is scored by
 //! predicting every station from the others ([`lasting_gain`]); the network translations are a
 //! nuisance there and are removed before the surrogates randomise each station's series, as for
 //! the second source.
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
+    declare_at, distinct_best, grid, on_bound, pattern, position_params, refine, resample_at,
     translations, with_translations,
 };
 use crate::analysis::score::weighted_gain;
@@ -31,7 +28,6 @@ use crate::analysis::{Family, Rejection};
 use crate::gnss::residuals::SourceGrid;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
-use crate::numerics::median;
 use anyhow::Result;
 use nalgebra::{DMatrix, DVector};
 use rand::rngs::StdRng;
@@ -44,20 +40,6 @@ const CANDIDATES: usize = 3;
 pub const SCAN_DAYS: usize = 180;
 /// Days between the scanned epochs.
 pub const SCAN_SPACING: usize = 30;
-/// Depths (km) of the search grid: the second source's
-/// [`GRID_DEPTHS`](super::second_source::GRID_DEPTHS) and two shallower, so that a deflation
-/// 2–3 km deep is not held on a bound at 2 km. The second source keeps its grid: under `red`
-/// noise its surrogates' best shallow points raise its chance level.
-pub const LASTING_DEPTHS: [f64; 15] = [
-    1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0,
-];
-
-/// The lasting source's search grid ([`LASTING_DEPTHS`]; computed once per set of residuals).
-fn lasting_grid(res: &GnssResiduals) -> &SourceGrid {
-    res.ctx
-        .lasting_grid
-        .get_or_init(|| grid_at(res, &LASTING_DEPTHS))
-}
 
 /// The lasting-source family.
 pub struct LastingSource;
@@ -92,89 +74,18 @@ fn offsets(r: &[f64], nc: usize) -> Vec<(usize, Vec<f64>)> {
 
 /// `(gᵀd)² / gᵀg` over pairs of channels of different stations (`ns` stations, channel `c` of
 /// station `c % ns`): the offset `d` along `g` as the stations share it — one station's own
-/// jump (a monument, its red noise) does not count. It locates the source across; over `gᵀg`
-/// the pairs-only numerator favours patterns spread evenly over the stations, so the depth is
-/// then taken by [`shared_offset_standardised`].
+/// jump (a monument, its red noise) does not count.
 fn shared_offset(g: &[f64], d: &[f64], ns: usize) -> f64 {
-    pairs_along(g, d, ns).map_or(0.0, |(u, _, gg)| u / gg)
-}
-
-/// [`shared_offset`] standardised by its pairs: with `uᵢ = gᵢᵀdᵢ` and `Gᵢ = gᵢᵀgᵢ` per station,
-/// `Σᵢ≠ⱼ uᵢuⱼ / √(Σᵢ≠ⱼ GᵢGⱼ)`. By Cauchy–Schwarz over the pairs an offset along a pattern `t`
-/// scores highest at `g ∝ t` (over `gᵀg`, a source 3 km deep scores highest at 5 km: the test
-/// below), and for independent noise of unit spread its spread is the same for every `g`.
-fn shared_offset_standardised(g: &[f64], d: &[f64], ns: usize) -> f64 {
-    pairs_along(g, d, ns).map_or(0.0, |(u, e, gg)| {
-        if e <= latent::DECLARED_NORM2 * gg {
-            0.0 // one station only: nothing shared
-        } else {
-            u / e.sqrt()
-        }
-    })
-}
-
-/// `(Σᵢ≠ⱼ uᵢuⱼ, Σᵢ≠ⱼ GᵢGⱼ, gᵀg)` of [`shared_offset_standardised`]; `None` for a null `g`.
-fn pairs_along(g: &[f64], d: &[f64], ns: usize) -> Option<(f64, f64, f64)> {
     let gg: f64 = g.iter().map(|v| v * v).sum();
     if gg < latent::DECLARED_NORM2 || ns == 0 {
-        return None;
+        return 0.0;
     }
-    let (mut u, mut e) = (vec![0.0; ns], vec![0.0; ns]);
+    let mut per_station = vec![0.0; ns];
     for (c, (a, b)) in g.iter().zip(d).enumerate() {
-        u[c % ns] += a * b;
-        e[c % ns] += a * a;
+        per_station[c % ns] += a * b;
     }
-    let pairs = |v: &[f64]| v.iter().sum::<f64>().powi(2) - v.iter().map(|x| x * x).sum::<f64>();
-    Some((pairs(&u), pairs(&e), gg))
-}
-
-/// The depth below `pos` at which `stat` is largest: the grid's depths, then steps of 0.5 km
-/// halved down to 0.1 km, within the grid's range.
-fn best_depth(res: &GnssResiduals, mut pos: [f64; 3], stat: &dyn Fn(&[f64]) -> f64) -> [f64; 3] {
-    let (lo, hi) = (LASTING_DEPTHS[0], LASTING_DEPTHS[LASTING_DEPTHS.len() - 1]);
-    let [x, y, _] = pos;
-    let at = |z: f64| stat(&pattern(res, [x, y, z]));
-    let mut best = at(pos[2]);
-    for z in LASTING_DEPTHS {
-        let v = at(z);
-        if v > best {
-            (best, pos[2]) = (v, z);
-        }
-    }
-    let mut step = 0.5;
-    while step >= 0.1 {
-        for z in [pos[2] - step, pos[2] + step] {
-            let v = if (lo..=hi).contains(&z) {
-                at(z)
-            } else {
-                f64::MIN
-            };
-            if v > best {
-                (best, pos[2]) = (v, z);
-            }
-        }
-        step /= 2.0;
-    }
-    pos
-}
-
-/// Each channel's spread of the [`offsets`], robustly: the root of the median of its squared
-/// offsets over every scanned epoch, over that median for Gaussian noise (of χ²₁, 0.455) — a
-/// change that stays moves only the epochs near its onset. A channel without spread gets an
-/// infinite one (no weight).
-fn offset_spread(d: &[(usize, Vec<f64>)], nc: usize) -> Vec<f64> {
-    const MEDIAN_CHI2_1: f64 = 0.454_936_423_119_572_8;
-    (0..nc)
-        .map(|c| {
-            let mut sq: Vec<f64> = d.iter().map(|(_, de)| de[c] * de[c]).collect();
-            let s = (median(&mut sq) / MEDIAN_CHI2_1).sqrt();
-            if s > 0.0 && s.is_finite() {
-                s
-            } else {
-                f64::INFINITY
-            }
-        })
-        .collect()
+    let total: f64 = per_station.iter().sum();
+    (total * total - per_station.iter().map(|v| v * v).sum::<f64>()) / gg
 }
 
 /// The held-out gain of a change of the source's volume at row `e` that stays: each station's
@@ -295,15 +206,11 @@ fn candidates(table: &[Vec<f64>], pts: &[[f64; 3]]) -> Vec<(f64, usize, usize)> 
 fn search(res: &GnssResiduals) -> LastingFit {
     let (ns, nc) = (res.ns(), res.nc());
     let d = offsets(&res.fit.r, nc);
-    // The depth's statistic in units of each channel's spread: every pair of stations weighs
-    // as its noise says.
-    let spread = offset_spread(&d, nc);
-    let whiten = |g: &[f64]| -> Vec<f64> { g.iter().zip(&spread).map(|(v, s)| v / s).collect() };
     let SourceGrid {
         points: pts,
         patterns,
         ..
-    } = lasting_grid(res);
+    } = grid(res);
     if d.is_empty() || pts.is_empty() {
         return LastingFit::default();
     }
@@ -317,10 +224,6 @@ fn search(res: &GnssResiduals) -> LastingFit {
     for (v, pi, k) in candidates(&table, pts) {
         let (onset, de) = &d[k];
         let pos = refine(res, pts, pts[pi], v, &|g| shared_offset(g, de, ns)).0;
-        let white = whiten(de);
-        let pos = best_depth(res, pos, &|g| {
-            shared_offset_standardised(&whiten(g), &white, ns)
-        });
         let gain = lasting_gain(&pattern(res, pos), &ts, &res.fit.r, nc, ns, *onset);
         // (The first candidate stands even without a gain: its position is still reported.)
         if best.is_none_or(|b| gain > b.score) {
@@ -389,7 +292,7 @@ impl Family<GnssResiduals> for LastingSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
-        on_bound(&lasting_grid(res).points, fit.pos)
+        on_bound(res, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
@@ -412,14 +315,6 @@ mod tests {
     use super::*;
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
-
-    #[test]
-    fn lasting_depths_extend_the_second_sources_upward() {
-        use super::super::second_source::GRID_DEPTHS;
-        assert!(LASTING_DEPTHS.windows(2).all(|w| w[0] < w[1]));
-        assert_eq!(LASTING_DEPTHS[..2], [1.0, 1.5]);
-        assert_eq!(LASTING_DEPTHS[2..], GRID_DEPTHS);
-    }
 
     #[test]
     fn offsets_measure_a_step_at_a_scanned_epoch() {
@@ -446,67 +341,8 @@ mod tests {
         let one_station = [1.0, 0.0, 0.0, 0.5, 0.0, 0.0];
         assert_eq!(shared_offset(&one_station, &one_station, ns), 0.0);
         let g = [1.0, 2.0, 0.0, 0.0, 0.0, 1.0];
-        // Per station gᵀd = gᵀg: 1, 4, 1 → (1 + 4 + 1)² − (1 + 16 + 1) = 18, over gᵀg = 6 and
-        // over √18 standardised.
+        // Per station gᵀd: 1, 4, 1 → (1 + 4 + 1)² − (1 + 16 + 1) = 18, over gᵀg = 6.
         assert!((shared_offset(&g, &g, ns) - 3.0).abs() < 1e-12);
-        assert!((shared_offset_standardised(&g, &g, ns) - 18f64.sqrt()).abs() < 1e-12);
-        assert_eq!(
-            shared_offset_standardised(&one_station, &one_station, ns),
-            0.0
-        );
-    }
-
-    /// The field of a source 3 km deep, 1 km from the nearest of five stations, scores highest
-    /// at its own depth among depths 2–8 km below the same point standardised, at 5 km over
-    /// `gᵀg`.
-    #[test]
-    fn shared_offsets_peak_at_the_sources_depth() {
-        use magic_core::mogi::{field, Station};
-        let stations: Vec<Station> = [(0.0, 0.0), (5.0, 1.0), (-4.0, 3.0), (2.0, -6.0), (8.0, 7.0)]
-            .map(|(x_km, y_km)| Station {
-                x_km,
-                y_km,
-                z_km: 0.0,
-            })
-            .to_vec();
-        let at = |depth: f64| {
-            let mut u = vec![0.0; 15];
-            field(&stations, &[1.0, 0.0, depth, -1.0], &mut u).unwrap();
-            u
-        };
-        let d = at(3.0);
-        let best = |stat: fn(&[f64], &[f64], usize) -> f64| {
-            (4..=16)
-                .map(|k| k as f64 / 2.0)
-                .max_by(|a, b| {
-                    let s = |z: f64| stat(&at(z), &d, 5);
-                    s(*a).total_cmp(&s(*b))
-                })
-                .unwrap()
-        };
-        assert_eq!(best(shared_offset_standardised), 3.0);
-        assert_eq!(best(shared_offset), 5.0);
-    }
-
-    /// The spread of offsets drawn with sd 1 and 3 comes out near 1 and 3 though a tenth of
-    /// the epochs hold a large change; a channel that never moves gets no weight.
-    #[test]
-    fn offset_spread_is_the_noise_not_the_change() {
-        let mut rng = StdRng::seed_from_u64(5);
-        let mut normal =
-            || -> f64 { (0..12).map(|_| rng.random_range(0.0..1.0)).sum::<f64>() - 6.0 };
-        let d: Vec<(usize, Vec<f64>)> = (0..400)
-            .map(|k| {
-                let change = if k % 10 == 0 { 20.0 } else { 0.0 };
-                (k, vec![normal() + change, 3.0 * normal(), 0.0])
-            })
-            .collect();
-        let s = offset_spread(&d, 3);
-        assert!(
-            (s[0] - 1.0).abs() < 0.2 && (s[1] - 3.0).abs() < 0.45,
-            "{s:?}"
-        );
-        assert_eq!(s[2], f64::INFINITY);
     }
 
     /// [`lasting_gain`] written out: per held-out station, the amplitude fitted directly on the
