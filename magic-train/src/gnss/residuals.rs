@@ -104,6 +104,8 @@ pub struct Context {
     pub splits: Vec<SplitName>,
     /// Cached second-source search grid and its projected patterns.
     pub(crate) source_grid: OnceLock<SourceGrid>,
+    /// Cached lasting-source search grid (the second source's, reaching shallower).
+    pub(crate) lasting_grid: OnceLock<SourceGrid>,
 }
 
 /// Residuals of a model on a dataset: the analysed days in time order (which surrogates
@@ -329,6 +331,7 @@ pub fn residuals(
             total_fit,
             splits: splits.to_vec(),
             source_grid: OnceLock::new(),
+            lasting_grid: OnceLock::new(),
         }),
         fit,
     })

@@ -9,7 +9,7 @@
 //! in the other's chance.
 //!
 //! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
-//! second source's grid, bound rule and refinement) whose pattern the network's offsets at some
+//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule and refinement) whose pattern the network's offsets at some
 //! epoch follow best — mean over [`SCAN_DAYS`] days after less mean over those before, every
 //! [`SCAN_SPACING`] days, counting products of different stations only — and the best point at
 //! each of the few epochs where the offsets are largest, so that one change cannot hide another
@@ -20,7 +20,7 @@
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid, on_bound, pattern, position_params, refine, resample_at,
+    declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
     translations, with_translations,
 };
 use crate::analysis::score::weighted_gain;
@@ -40,6 +40,20 @@ const CANDIDATES: usize = 3;
 pub const SCAN_DAYS: usize = 180;
 /// Days between the scanned epochs.
 pub const SCAN_SPACING: usize = 30;
+/// Depths (km) of the search grid: the second source's
+/// [`GRID_DEPTHS`](super::second_source::GRID_DEPTHS) and two shallower, so that a deflation
+/// 2–3 km deep is not held on a bound at 2 km. The second source keeps its grid: under `red`
+/// noise its surrogates' best shallow points raise its chance level.
+pub const LASTING_DEPTHS: [f64; 15] = [
+    1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0,
+];
+
+/// The lasting source's search grid ([`LASTING_DEPTHS`]; computed once per set of residuals).
+fn lasting_grid(res: &GnssResiduals) -> &SourceGrid {
+    res.ctx
+        .lasting_grid
+        .get_or_init(|| grid_at(res, &LASTING_DEPTHS))
+}
 
 /// The lasting-source family.
 pub struct LastingSource;
@@ -210,7 +224,7 @@ fn search(res: &GnssResiduals) -> LastingFit {
         points: pts,
         patterns,
         ..
-    } = grid(res);
+    } = lasting_grid(res);
     if d.is_empty() || pts.is_empty() {
         return LastingFit::default();
     }
@@ -292,7 +306,7 @@ impl Family<GnssResiduals> for LastingSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
-        on_bound(res, fit.pos)
+        on_bound(&lasting_grid(res).points, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
@@ -315,6 +329,14 @@ mod tests {
     use super::*;
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn lasting_depths_extend_the_second_sources_upward() {
+        use super::super::second_source::GRID_DEPTHS;
+        assert!(LASTING_DEPTHS.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(LASTING_DEPTHS[..2], [1.0, 1.5]);
+        assert_eq!(LASTING_DEPTHS[2..], GRID_DEPTHS);
+    }
 
     #[test]
     fn offsets_measure_a_step_at_a_scanned_epoch() {

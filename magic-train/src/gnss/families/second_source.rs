@@ -117,40 +117,45 @@ pub(super) fn with_translations(res: &GnssResiduals, pos: [f64; 3]) -> Vec<Vec<f
 /// [`GRID_DEPTHS`]), without the neighbourhood of the main source, with the projected pattern of
 /// each point (computed once per set of residuals: surrogates share it).
 pub(super) fn grid(res: &GnssResiduals) -> &SourceGrid {
-    res.ctx.source_grid.get_or_init(|| {
-        let basis = nuisance_basis(res);
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-        for s in &res.ctx.network.stations {
-            x0 = x0.min(s.x_km);
-            x1 = x1.max(s.x_km);
-            y0 = y0.min(s.y_km);
-            y1 = y1.max(s.y_km);
-        }
-        let main = res.ctx.main_source;
-        let mut pts = Vec::new();
-        let mut x = (x0 - GRID_MARGIN_KM).floor();
-        while x <= x1 + GRID_MARGIN_KM {
-            let mut y = (y0 - GRID_MARGIN_KM).floor();
-            while y <= y1 + GRID_MARGIN_KM {
-                if (x - main[0]).hypot(y - main[1]) >= MAIN_SOURCE_EXCLUSION_KM {
-                    for d in GRID_DEPTHS {
-                        pts.push([x, y, d]);
-                    }
+    res.ctx
+        .source_grid
+        .get_or_init(|| grid_at(res, &GRID_DEPTHS))
+}
+
+/// The grid of [`grid`] at `depths` (km).
+pub(super) fn grid_at(res: &GnssResiduals, depths: &[f64]) -> SourceGrid {
+    let basis = nuisance_basis(res);
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for s in &res.ctx.network.stations {
+        x0 = x0.min(s.x_km);
+        x1 = x1.max(s.x_km);
+        y0 = y0.min(s.y_km);
+        y1 = y1.max(s.y_km);
+    }
+    let main = res.ctx.main_source;
+    let mut pts = Vec::new();
+    let mut x = (x0 - GRID_MARGIN_KM).floor();
+    while x <= x1 + GRID_MARGIN_KM {
+        let mut y = (y0 - GRID_MARGIN_KM).floor();
+        while y <= y1 + GRID_MARGIN_KM {
+            if (x - main[0]).hypot(y - main[1]) >= MAIN_SOURCE_EXCLUSION_KM {
+                for &d in depths {
+                    pts.push([x, y, d]);
                 }
-                y += 1.0;
             }
-            x += 1.0;
+            y += 1.0;
         }
-        let patterns = pts
-            .par_iter()
-            .map(|p| pattern_off(res, &basis, *p))
-            .collect();
-        SourceGrid {
-            basis,
-            points: pts,
-            patterns,
-        }
-    })
+        x += 1.0;
+    }
+    let patterns = pts
+        .par_iter()
+        .map(|p| pattern_off(res, &basis, *p))
+        .collect();
+    SourceGrid {
+        basis,
+        points: pts,
+        patterns,
+    }
 }
 
 /// The grid's box: lowest and highest x, y, depth.
@@ -265,9 +270,9 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     best
 }
 
-/// Why a source at `pos` cannot count as a discovery: on the bound of the search grid.
-pub(super) fn on_bound(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
-    let (lo, hi) = bounding_box(&grid(res).points);
+/// Why a source at `pos` cannot count as a discovery: on the bound of the search grid `pts`.
+pub(super) fn on_bound(pts: &[[f64; 3]], pos: [f64; 3]) -> Option<Rejection> {
+    let (lo, hi) = bounding_box(pts);
     (0..3)
         .find(|&k| pos[k] - lo[k] < BOUND_TOLERANCE_KM || hi[k] - pos[k] < BOUND_TOLERANCE_KM)
         .map(|k| Rejection::OnBound {
@@ -377,7 +382,7 @@ impl Family<GnssResiduals> for SecondSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<Rejection> {
-        on_bound(res, fit.pos)
+        on_bound(&grid(res).points, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
