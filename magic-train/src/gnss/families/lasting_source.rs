@@ -9,11 +9,11 @@
 //! in the other's chance.
 //!
 //! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
-//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule and refinement) whose pattern the network's offsets at some
-//! epoch follow best — mean over [`SCAN_DAYS`] days after less mean over those before, every
-//! [`SCAN_SPACING`] days, counting products of different stations only — and the best point at
-//! each of the few epochs where the offsets are largest, so that one change cannot hide another
-//! at a different time. Each is scored by
+//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule and refinement)
+//! whose pattern the network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days
+//! after less mean over those before, every [`SCAN_SPACING`] days, counting products of
+//! different stations only — and the best point at each of the few epochs where the offsets are
+//! largest, so that one change cannot hide another at a different time. Each is scored by
 //! predicting every station from the others ([`lasting_gain`]); the network translations are a
 //! nuisance there and are removed before the surrogates randomise each station's series, as for
 //! the second source.
