@@ -50,6 +50,13 @@ pub trait Family<R>: Sync {
     fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
         None
     }
+    /// Whether a [`statistic`](Family::statistic) the surrogates reach rejects the fit (the
+    /// step's: its scan is what tells a step from a wandering level). `false`: the statistic
+    /// only supports — standing out, it makes a score above chance significant; not standing
+    /// out, it takes nothing away (a scan whose chance peaks are as high as a real effect's).
+    fn statistic_vetoes(&self) -> bool {
+        true
+    }
     /// The fit's key parameters (name, value), whose uncertainty the bootstrap measures.
     fn key_params(&self, _res: &R, _fit: &Self::Fit) -> Vec<(&'static str, f64)> {
         vec![]
@@ -119,7 +126,7 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
                 .copied()
                 .fold(f64::NEG_INFINITY, f64::max);
             if c.rejected.is_none() {
-                if stat <= top {
+                if stat <= top && self.statistic_vetoes() {
                     c.significant = false;
                     c.rejected = Some(Rejection::StatisticNotAbove {
                         statistic: stat,
@@ -190,6 +197,7 @@ mod tests {
     struct Toy {
         score: f64,
         stat: f64,
+        vetoes: bool,
     }
 
     impl Family<f64> for Toy {
@@ -219,14 +227,27 @@ mod tests {
         fn statistic(&self, fit: &(f64, f64)) -> Option<f64> {
             Some(fit.1)
         }
+        fn statistic_vetoes(&self) -> bool {
+            self.vetoes
+        }
     }
 
-    fn assess(score: f64, stat: f64) -> Candidate {
+    fn assess_toy(score: f64, stat: f64, vetoes: bool) -> Candidate {
         let opts = AnalysisOptions {
             bootstrap: 0,
             ..AnalysisOptions::default()
         };
-        Toy { score, stat }.assess(&-1.0, &opts).unwrap()
+        Toy {
+            score,
+            stat,
+            vetoes,
+        }
+        .assess(&-1.0, &opts)
+        .unwrap()
+    }
+
+    fn assess(score: f64, stat: f64) -> Candidate {
+        assess_toy(score, stat, true)
     }
 
     #[test]
@@ -244,5 +265,16 @@ mod tests {
         let c = assess(0.2, 22.0);
         assert!(!c.significant && c.rejected.is_some(), "{c:?}");
         assert!(assess(0.2, 26.0).significant);
+    }
+
+    #[test]
+    fn a_statistic_that_only_supports_never_rejects() {
+        // The same fits with a statistic that does not veto: a score beyond its margin stands
+        // whatever the statistic; one just above chance still needs the statistic to stand out.
+        let c = assess_toy(0.2, 22.0, false);
+        assert!(c.significant && c.rejected.is_none(), "{c:?}");
+        assert!(assess_toy(0.0125, 90.0, false).significant);
+        assert!(!assess_toy(0.0125, 26.0, false).significant);
+        assert!(!assess_toy(0.005, 90.0, false).significant);
     }
 }
