@@ -67,8 +67,8 @@ pub struct LastingFit {
     pub onset: usize,
     /// Share of the residual variance explained (held-out stations).
     pub score: f64,
-    /// The scan statistic at the fit ([`shared_offset`] at its position and onset): the
-    /// family's detection statistic, which must stand above the surrogates' as the step scan's.
+    /// The scan statistic at the fit (`shared_offset` at its position and onset): the
+    /// family's detection statistic, which supports its score and does not veto it.
     pub stat: f64,
 }
 
