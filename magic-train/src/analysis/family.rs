@@ -40,9 +40,10 @@ pub trait Family<R>: Sync {
         None
     }
     /// A detection statistic of the fit (larger: stronger) that must also exceed every
-    /// surrogate's, where the score alone can be met by structure the surrogates lack (the step
-    /// scan's peak: a level that wanders for years explains held-out days like a step, but only
-    /// a step is sharper than the noise makes its local jumps); `None` for most families.
+    /// surrogate's (unless it only supports: [`statistic_vetoes`](Family::statistic_vetoes)),
+    /// where the score alone can be met by structure the surrogates lack (the step scan's peak:
+    /// a level that wanders for years explains held-out days like a step, but only a step is
+    /// sharper than the noise makes its local jumps); `None` for most families.
     /// A statistic that stands out of the surrogates' by a margin like the score's
     /// ([`stands_out`](super::stands_out)) makes the fit significant once its
     /// held-out score exceeds chance at all: a local effect (a step in the record's last

@@ -16,7 +16,9 @@
 //! largest, so that one change cannot hide another at a different time. Each is scored by
 //! predicting every station from the others ([`lasting_gain`]); the network translations are a
 //! nuisance there and are removed before the surrogates randomise each station's series, as for
-//! the second source.
+//! the second source. The scan's value at the fit is the family's detection statistic: standing
+//! out of the surrogates', it makes a score merely above chance significant, as a step's does;
+//! unlike a step's, it never rejects a score beyond its margin.
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
