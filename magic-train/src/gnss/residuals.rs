@@ -18,8 +18,10 @@
 //! its Jacobian — position, depth, volume — is projected off) or held in place
 //! ([`MainSource::Held`]: only the one direction of that span along which the days vary most, a
 //! source whose volume changes where it is). Free, a second source 2–4 km from the main one is
-//! mostly a move of it and is rarely found; held, it stays in the residuals, and so does a main
-//! source that really moves between its episodes.
+//! mostly a move of it: what is left of its field looks like a shallower source, so free
+//! residuals carry a held view too ([`GnssResiduals::held`]), where the point-source families
+//! locate a source before scoring it on the free residuals. Held, a second source stays in the
+//! residuals whole, and so does a main source that really moves between its episodes.
 
 use super::{GnssProblem, Network};
 use crate::analysis::projection::{orthonormal, project, scaled};
@@ -116,6 +118,11 @@ pub struct GnssResiduals {
     pub ctx: Arc<Context>,
     /// The analysed days in time order, with each channel's mean over them removed.
     pub fit: Block,
+    /// With the main source free ([`MainSource::Free`]): the same days with it held in place
+    /// (its own context), where a point source is located — projected off the whole span, a
+    /// source near the main one keeps too little of its field to fix its depth by. `fit` is this
+    /// block projected off the rest of the span. `None` when held and free coincide.
+    pub held: Option<Arc<GnssResiduals>>,
 }
 
 impl GnssResiduals {
@@ -142,7 +149,7 @@ impl GnssResiduals {
             .collect()
     }
 
-    /// The same residuals with another analysed block (a surrogate).
+    /// The same residuals with another analysed block (a surrogate), without a held view.
     pub fn with_fit(&self, r: Vec<f64>) -> GnssResiduals {
         GnssResiduals {
             ctx: self.ctx.clone(),
@@ -150,7 +157,21 @@ impl GnssResiduals {
                 days: self.fit.days.clone(),
                 r,
             },
+            held: None,
         }
+    }
+
+    /// The residuals whose held view is `held` (a surrogate of [`GnssResiduals::held`]): the
+    /// analysed block is `held`'s projected off this context's tangent.
+    pub fn with_held(&self, held: GnssResiduals) -> GnssResiduals {
+        let mut out = self.with_fit(self.project_rows(&held.fit.r));
+        out.held = Some(Arc::new(held));
+        out
+    }
+
+    /// Where a point source is located: the held view if there is one, else these residuals.
+    pub fn locating(&self) -> &GnssResiduals {
+        self.held.as_deref().unwrap_or(self)
     }
 
     /// The report's view of the residuals (JSON) and its summary line.
@@ -298,13 +319,46 @@ pub fn residuals(
             Ok((0..nc).map(|c| (d.obs[c] - f[c]) / scale[c]).collect())
         })
         .collect::<Result<_>>()?;
-    let tangent = match mode {
-        MainSource::Free => orthonormal(&columns, 1e-9, 1),
-        MainSource::Held => held_tangent(&columns, scale, p.network.len(), &rows),
+    let shared = Shared {
+        network: &p.network,
+        scale,
+        mse,
+        main,
+        splits,
+        days: &days,
     };
+    let held = held_tangent(&columns, scale, p.network.len(), &rows);
+    Ok(match mode {
+        MainSource::Held => view(
+            &shared,
+            &rows,
+            held.unwrap_or_else(|| orthonormal(&columns, 1e-9, 1)),
+        ),
+        MainSource::Free => {
+            let mut free = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
+            free.held = held.map(|t| Arc::new(view(&shared, &rows, t)));
+            free
+        }
+    })
+}
+
+/// What the views of one set of residuals share ([`view`]).
+struct Shared<'a> {
+    network: &'a Network,
+    scale: &'a [f64],
+    mse: f64,
+    main: [f64; 3],
+    splits: &'a [SplitName],
+    days: &'a [f64],
+}
+
+/// The rows (one per day, standardised) projected off `tangent`, each channel's mean over the
+/// days removed, in a context of their own.
+fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssResiduals {
+    let nc = shared.scale.len();
     let r: Vec<Vec<f64>> = rows.par_iter().map(|row| project(&tangent, row)).collect();
     let mut fit = Block {
-        days,
+        days: shared.days.to_vec(),
         r: r.concat(),
     };
     let t_n = fit.len(nc);
@@ -320,21 +374,22 @@ pub fn residuals(
         }
     }
     let total_fit = fit.r.iter().map(|v| v * v).sum();
-    Ok(GnssResiduals {
+    GnssResiduals {
         ctx: Arc::new(Context {
-            network: p.network.clone(),
-            scale: scale.clone(),
+            network: shared.network.clone(),
+            scale: shared.scale.to_vec(),
             mean,
-            mse,
-            main_source: main,
+            mse: shared.mse,
+            main_source: shared.main,
             tangent,
             total_fit,
-            splits: splits.to_vec(),
+            splits: shared.splits.to_vec(),
             source_grid: OnceLock::new(),
             lasting_grid: OnceLock::new(),
         }),
         fit,
-    })
+        held: None,
+    }
 }
 
 /// The columns of F's Jacobian (standardised units, each with its largest entry) at the main
@@ -371,13 +426,13 @@ fn jacobian_columns(
 /// direction ([`held_source`], fitted with the declared latent effects, free every day, and the
 /// network's translations as nuisances) and the declared latent effects' directions. (A span
 /// that holds a translation cannot tell the source from a common mode: then the source is left
-/// free to move, its whole span projected off.)
+/// free to move, its whole span projected off: `None`.)
 fn held_tangent(
     columns: &[(Vec<f64>, f64)],
     scale: &[f64],
     ns: usize,
     rows: &[Vec<f64>],
-) -> Vec<Vec<f64>> {
+) -> Option<Vec<Vec<f64>>> {
     let k = SOURCE_VARIABLES.min(columns.len());
     let source = orthonormal(&columns[..k], 1e-9, 1);
     let latent = orthonormal(&columns[k..], 1e-9, 1);
@@ -386,12 +441,9 @@ fn held_tangent(
     let mut nuisance = translation_basis(scale, ns);
     nuisance.extend(latent.iter().cloned());
     let nuisance = orthonormal(&unit(&nuisance), 1e-9, 2);
-    let mut tangent = match held_source(&source, &nuisance, rows) {
-        Some(w) => vec![w],
-        None => source,
-    };
+    let mut tangent = vec![held_source(&source, &nuisance, rows)?];
     tangent.extend(latent);
-    orthonormal(&unit(&tangent), 1e-9, 2)
+    Some(orthonormal(&unit(&tangent), 1e-9, 2))
 }
 
 /// The main source held in place: the one direction, within the span of its own Jacobian
@@ -548,5 +600,52 @@ mod tests {
         let with_up: Vec<(Vec<f64>, f64)> = with_up.into_iter().map(|q| (q, 1.0)).collect();
         let with_up = orthonormal(&with_up, 1e-9, 2);
         assert!(held_source(&with_up, &translations, &rows).is_none());
+    }
+
+    /// The free residuals are the held ones projected off the rest of the main source's span
+    /// (the held direction lies within it): a surrogate drawn on the held view and projected
+    /// ([`GnssResiduals::with_held`]) is seen as the data are.
+    #[test]
+    fn the_free_view_is_the_held_view_projected() {
+        let network = Network::akutan();
+        let (ns, nc) = (network.len(), 3 * network.len());
+        let mut rng = StdRng::seed_from_u64(11);
+        let mut normal = move || draw::normal(&mut rng);
+        let columns: Vec<(Vec<f64>, f64)> = (0..5)
+            .map(|_| ((0..nc).map(|_| normal()).collect(), 1.0))
+            .collect();
+        let rows: Vec<Vec<f64>> = (0..400)
+            .map(|t| {
+                let a = (t as f64 / 40.0).sin();
+                (0..nc)
+                    .map(|c| a * columns[0].0[c] + 0.3 * a * columns[2].0[c] + normal())
+                    .collect()
+            })
+            .collect();
+        let scale = vec![1.0; nc];
+        let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+        let shared = Shared {
+            network: &network,
+            scale: &scale,
+            mse: 0.0,
+            main: [0.0; 3],
+            splits: &[SplitName::Train],
+            days: &days,
+        };
+        let held = held_tangent(&columns, &scale, ns, &rows).expect("held in place");
+        let held = view(&shared, &rows, held);
+        let mut free = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
+        let drawn = free.with_held(held.clone());
+        let gap = drawn
+            .fit
+            .r
+            .iter()
+            .zip(&free.fit.r)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(gap < 1e-12, "largest difference {gap}");
+        assert!(std::ptr::eq(free.locating(), &free));
+        free.held = Some(Arc::new(held));
+        assert!(std::ptr::eq(free.locating(), free.held.as_deref().unwrap()));
+        assert!(free.with_fit(free.fit.r.clone()).held.is_none());
     }
 }

@@ -9,7 +9,8 @@
 //! in the other's chance.
 //!
 //! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
-//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule and refinement)
+//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule, refinement and
+//! held view of the residuals for locating)
 //! whose pattern the network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days
 //! after less mean over those before, every [`SCAN_SPACING`] days, counting products of
 //! different stations only — and the best point at each of the few epochs where the offsets are
@@ -23,7 +24,7 @@
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
-    translations, with_translations,
+    surrogate_at, translations,
 };
 use crate::analysis::score::weighted_gain;
 use crate::analysis::{Family, Rejection};
@@ -224,12 +225,13 @@ fn candidates(table: &[Vec<f64>], pts: &[[f64; 3]]) -> Vec<(f64, usize, usize)> 
 /// kept.
 fn search(res: &GnssResiduals) -> LastingFit {
     let (ns, nc) = (res.ns(), res.nc());
-    let d = offsets(&res.fit.r, nc);
+    let loc = res.locating();
+    let d = offsets(&loc.fit.r, nc);
     let SourceGrid {
         points: pts,
         patterns,
         ..
-    } = lasting_grid(res);
+    } = lasting_grid(loc);
     if d.is_empty() || pts.is_empty() {
         return LastingFit::default();
     }
@@ -242,7 +244,7 @@ fn search(res: &GnssResiduals) -> LastingFit {
     let mut best: Option<LastingFit> = None;
     for (v, pi, k) in candidates(&table, pts) {
         let (onset, de) = &d[k];
-        let (pos, stat) = refine(res, pts, pts[pi], v, &|g| shared_offset(g, de, ns));
+        let (pos, stat) = refine(loc, pts, pts[pi], v, &|g| shared_offset(g, de, ns));
         let gain = lasting_gain(&pattern(res, pos), &ts, &res.fit.r, nc, ns, *onset);
         // (The first candidate stands even without a gain: its position is still reported.)
         if best.is_none_or(|b| gain > b.score) {
@@ -287,11 +289,7 @@ impl Family<GnssResiduals> for LastingSource {
         fit: &LastingFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(
-            res,
-            &with_translations(res, fit.pos),
-            rng,
-        ))
+        Ok(surrogate_at(res, fit.pos, rng))
     }
     /// Position; onset (the scanned epoch: for a change that builds over months, near its
     /// middle), start and end of the change (the day after the last one before the onset on
@@ -322,7 +320,7 @@ impl Family<GnssResiduals> for LastingSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
-        on_bound(&lasting_grid(res).points, fit.pos)
+        on_bound(&lasting_grid(res.locating()).points, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)

@@ -7,9 +7,13 @@
 //!
 //! **Located on all stations, scored on held-out ones, where it happens.** The position is the
 //! one whose pattern holds most of the residuals' persistent variance, fitted on every station
-//! at once (the ratio of the nearest station's motion to the others' fixes the depth). Its score
-//! is the leave-one-station-out gain, taken over its best interval of whole
-//! [`INTERVAL_BLOCK_DAYS`] blocks: a transient is not diluted by the years it is absent.
+//! at once (the ratio of the nearest station's motion to the others' fixes the depth) — with
+//! the main source held in place where the analysis lets it move
+//! ([`GnssResiduals::locating`]): projected off its every move, a source near it keeps too
+//! little of its field to fix the depth by and drifts to the grid's shallowest bound. Its score
+//! is taken on the analysis's own residuals, so a source counts only by what no move of the
+//! main source produces: the leave-one-station-out gain, over its best interval of whole
+//! [`INTERVAL_BLOCK_DAYS`] blocks (a transient is not diluted by the years it is absent).
 //! Patterns are projected off the network's translations as well as off F's tangent space, and
 //! each held-out station's prediction fits the translation as a nuisance: a persistent common
 //! mode (reference frame, loading) neither draws the source to the deepest, farthest point,
@@ -234,18 +238,21 @@ pub(super) fn distinct_best(
 }
 
 /// Candidate positions: per neighbour window, the grid points along whose pattern the
-/// residuals' persistent variance is largest ([`latent::persistent_along`], all stations), the best
-/// few (distinct) refined locally; the candidate whose leave-one-station-out gain over its best
-/// interval of days ([`latent::best_interval_gain`]) is largest wins.
+/// residuals' persistent variance is largest ([`latent::persistent_along`], all stations, on
+/// [`GnssResiduals::locating`]: with the main source held), the best few (distinct) refined
+/// locally; the candidate whose leave-one-station-out gain over its best interval of days
+/// ([`latent::best_interval_gain`], on `res` itself) is largest wins. `xs` are the locating
+/// residuals' windows.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     let (ns, nc) = (res.ns(), res.nc());
     let r = latent::highpass(&res.fit.r, nc, latent::LATENT_HIGHPASS_DAYS);
     let ts = translations(res);
+    let loc = res.locating();
     let SourceGrid {
         points: pts,
         patterns,
         ..
-    } = grid(res);
+    } = grid(loc);
     let mut best = SourceFit::default();
     for (w, x) in xs {
         let scored = patterns
@@ -254,7 +261,7 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             .map(|(pi, g)| (latent::persistent_along(g, x), pi))
             .collect();
         for (q0, pi) in distinct_best(scored, pts, SOURCE_CANDIDATES) {
-            let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
+            let (pos, _) = refine(loc, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
             let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, *w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
             if gain > best.score {
@@ -293,9 +300,26 @@ pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
 }
 
 /// The bootstrap draw of a source at `pos`: the source and the translations kept, the rest
-/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]).
+/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]); drawn
+/// on the held view where there is one (where the source is located).
 pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    latent::resample_coherent(res, &with_translations(res, pos), rng)
+    match &res.held {
+        Some(h) => res.with_held(latent::resample_coherent(
+            h,
+            &with_translations(h, pos),
+            rng,
+        )),
+        None => latent::resample_coherent(res, &with_translations(res, pos), rng),
+    }
+}
+
+/// A source family's surrogate for a source at `pos` ([`latent::surrogate`]): drawn on the
+/// held view where there is one, so that locating and scoring see it as they see the data.
+pub(super) fn surrogate_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
+    match &res.held {
+        Some(h) => res.with_held(latent::surrogate(h, &with_translations(h, pos), rng)),
+        None => latent::surrogate(res, &with_translations(res, pos), rng),
+    }
 }
 
 /// The effect that adds a source at `pos` to F, if it explains anything (`score > 0`).
@@ -314,7 +338,7 @@ impl Family<GnssResiduals> for SecondSource {
         "second_source"
     }
     fn fit(&self, res: &GnssResiduals) -> Result<SourceFit> {
-        Ok(search(res, &latent::windows(res)))
+        Ok(search(res, &latent::windows(res.locating())))
     }
     fn score(&self, fit: &SourceFit) -> f64 {
         fit.score
@@ -325,11 +349,7 @@ impl Family<GnssResiduals> for SecondSource {
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(
-            res,
-            &with_translations(res, fit.pos),
-            rng,
-        ))
+        Ok(surrogate_at(res, fit.pos, rng))
     }
     /// Position, and from the daily volume change of the source (30-day running mean, relative
     /// to its median) the peak and the window around it where the change stays beyond twice its
@@ -382,7 +402,7 @@ impl Family<GnssResiduals> for SecondSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<Rejection> {
-        on_bound(&grid(res).points, fit.pos)
+        on_bound(&grid(res.locating()).points, fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
