@@ -10,8 +10,8 @@
 //!
 //! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
 //! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule, refinement and
-//! held view of the residuals for locating)
-//! whose pattern the network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days
+//! held view of the residuals for locating) whose pattern the network's offsets at some epoch
+//! follow best — mean over [`SCAN_DAYS`] days
 //! after less mean over those before, every [`SCAN_SPACING`] days, counting products of
 //! different stations only — and the best point at each of the few epochs where the offsets are
 //! largest, so that one change cannot hide another at a different time. Each is scored by

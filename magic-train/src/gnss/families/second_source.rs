@@ -301,24 +301,31 @@ pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
 
 /// The bootstrap draw of a source at `pos`: the source and the translations kept, the rest
 /// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]); drawn
-/// on the held view where there is one (where the source is located).
+/// where the source is located ([`drawn_where_located`]).
 pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    match &res.held {
-        Some(h) => res.with_held(latent::resample_coherent(
-            h,
-            &with_translations(h, pos),
-            rng,
-        )),
-        None => latent::resample_coherent(res, &with_translations(res, pos), rng),
-    }
+    drawn_where_located(res, pos, |r, keep| latent::resample_coherent(r, keep, rng))
 }
 
-/// A source family's surrogate for a source at `pos` ([`latent::surrogate`]): drawn on the
-/// held view where there is one, so that locating and scoring see it as they see the data.
+/// A source family's surrogate for a source at `pos` ([`latent::surrogate`]), drawn where the
+/// source is located ([`drawn_where_located`]).
 pub(super) fn surrogate_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    match &res.held {
-        Some(h) => res.with_held(latent::surrogate(h, &with_translations(h, pos), rng)),
-        None => latent::surrogate(res, &with_translations(res, pos), rng),
+    drawn_where_located(res, pos, |r, keep| latent::surrogate(r, keep, rng))
+}
+
+/// `draw` (given the residuals and the patterns it keeps: the source at `pos` and the
+/// translations) made on the held view where there is one and projected back
+/// ([`GnssResiduals::with_held`]), so that locating and scoring see it as they see the data.
+fn drawn_where_located(
+    res: &GnssResiduals,
+    pos: [f64; 3],
+    draw: impl FnOnce(&GnssResiduals, &[Vec<f64>]) -> GnssResiduals,
+) -> GnssResiduals {
+    let loc = res.locating();
+    let drawn = draw(loc, &with_translations(loc, pos));
+    if res.held.is_some() {
+        res.with_held(drawn)
+    } else {
+        drawn
     }
 }
 
