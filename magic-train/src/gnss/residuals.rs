@@ -161,11 +161,23 @@ impl GnssResiduals {
         }
     }
 
-    /// The residuals whose held view is `held` (a surrogate of [`GnssResiduals::held`]): the
-    /// analysed block is `held`'s projected off this context's tangent.
-    pub fn with_held(&self, held: GnssResiduals) -> GnssResiduals {
-        let mut out = self.with_fit(self.project_rows(&held.fit.r));
-        out.held = Some(Arc::new(held));
+    /// `drawn` (a draw of these residuals) with a held view: `drawn` plus the part of `held_rows`
+    /// (rows of the held view) beyond these residuals, what the projection takes off them. The
+    /// analysed block stays `drawn`'s. Without a held view, `drawn` itself.
+    pub fn beside_moves(&self, drawn: GnssResiduals, held_rows: &[f64]) -> GnssResiduals {
+        let Some(held) = self.held.as_deref() else {
+            return drawn;
+        };
+        let projected = self.project_rows(held_rows);
+        let rows = drawn
+            .fit
+            .r
+            .iter()
+            .zip(held_rows.iter().zip(&projected))
+            .map(|(d, (h, p))| d + (h - p))
+            .collect();
+        let mut out = drawn;
+        out.held = Some(Arc::new(held.with_fit(rows)));
         out
     }
 
@@ -603,8 +615,9 @@ mod tests {
     }
 
     /// The free residuals are the held ones projected off the rest of the main source's span
-    /// (the held direction lies within it): a surrogate drawn on the held view and projected
-    /// ([`GnssResiduals::with_held`]) is seen as the data are.
+    /// (the held direction lies within it); a draw of the free residuals given back the held
+    /// view's part beyond them ([`GnssResiduals::beside_moves`]) keeps that part as the data
+    /// hold it and is, projected, the draw again.
     #[test]
     fn the_free_view_is_the_held_view_projected() {
         let network = Network::akutan();
@@ -635,17 +648,31 @@ mod tests {
         let held = held_tangent(&columns, &scale, ns, &rows).expect("held in place");
         let held = view(&shared, &rows, held);
         let mut free = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
-        let drawn = free.with_held(held.clone());
-        let gap = drawn
-            .fit
-            .r
-            .iter()
-            .zip(&free.fit.r)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        assert!(gap < 1e-12, "largest difference {gap}");
+        let largest = |a: &[f64], b: &[f64]| {
+            a.iter()
+                .zip(b)
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        };
+        let gap = largest(&free.project_rows(&held.fit.r), &free.fit.r);
+        assert!(gap < 1e-12, "free vs held projected: {gap}");
         assert!(std::ptr::eq(free.locating(), &free));
-        free.held = Some(Arc::new(held));
+        let noise: Vec<f64> = (0..free.fit.r.len()).map(|_| normal()).collect();
+        let drawn = free.with_fit(free.project_rows(&noise));
+        let same = free.beside_moves(drawn.clone(), &held.fit.r);
+        assert!(same.held.is_none(), "no held view, nothing given back");
+        free.held = Some(Arc::new(held.clone()));
         assert!(std::ptr::eq(free.locating(), free.held.as_deref().unwrap()));
+        let out = free.beside_moves(drawn.clone(), &held.fit.r);
+        assert_eq!(out.fit.r, drawn.fit.r);
+        let out_held = out.held.as_deref().expect("a held view");
+        let gap = largest(&free.project_rows(&out_held.fit.r), &drawn.fit.r);
+        assert!(gap < 1e-12, "the draw's held view projected: {gap}");
+        let minus = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<_>>();
+        let gap = largest(
+            &minus(&out_held.fit.r, &out.fit.r),
+            &minus(&held.fit.r, &free.fit.r),
+        );
+        assert!(gap < 1e-12, "the part beyond the free view: {gap}");
         assert!(free.with_fit(free.fit.r.clone()).held.is_none());
     }
 }

@@ -374,7 +374,7 @@ pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -
 }
 
 /// `r` split into the daily fits of `patterns` (the effect) and the rest (the noise).
-fn split_effect(r: &[f64], nc: usize, patterns: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
+pub fn split_effect(r: &[f64], nc: usize, patterns: &[Vec<f64>]) -> (Vec<f64>, Vec<f64>) {
     let mut noise = r.to_vec();
     let mut effect = vec![0.0; noise.len()];
     for g in patterns {

@@ -20,7 +20,10 @@
 //! where its field is nearly uniform, nor counts for it. The surrogates remove the translation
 //! before they randomise each station's series (given a random sign per station, a common mode
 //! turns into a coherent pattern chance could credit to a source). The bootstrap of the position
-//! keeps the noise's coherence between stations instead ([`latent::resample_coherent`]).
+//! keeps the noise's coherence between stations instead ([`latent::resample_coherent`]). Both
+//! draw on the residuals the source is scored on and keep the held view's part beyond them (the
+//! main source's moves) as the data hold it: the surrogates are located beside the same moves,
+//! and randomised moves would no longer project off and would swell the chance level.
 
 use super::latent::{self, round3, Cross};
 use crate::analysis::projection::{orthonormal, project, scaled};
@@ -299,33 +302,63 @@ pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
     vec![("x_km", pos[0]), ("y_km", pos[1]), ("depth_km", pos[2])]
 }
 
+/// What a source family's draw keeps of the held view's part beyond the residuals (the main
+/// source's moves; [`beside_main_moves`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Moves {
+    /// All of it: the family reads the held view only to locate a source.
+    Whole,
+    /// Without the daily fit of the source (and the translations) there: the family also scores
+    /// a statistic on the held view, which must not find the source in its own surrogates.
+    WithoutSource,
+}
+
 /// The bootstrap draw of a source at `pos`: the source and the translations kept, the rest
-/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]); drawn
-/// where the source is located ([`drawn_where_located`]).
+/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]), beside
+/// the main source's moves as the data hold them ([`beside_main_moves`]).
 pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    drawn_where_located(res, pos, |r, keep| latent::resample_coherent(r, keep, rng))
+    let keep = with_translations(res, pos);
+    beside_main_moves(
+        res,
+        pos,
+        latent::resample_coherent(res, &keep, rng),
+        Moves::Whole,
+    )
 }
 
-/// A source family's surrogate for a source at `pos` ([`latent::surrogate`]), drawn where the
-/// source is located ([`drawn_where_located`]).
-pub(super) fn surrogate_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    drawn_where_located(res, pos, |r, keep| latent::surrogate(r, keep, rng))
-}
-
-/// `draw` (given the residuals and the patterns it keeps: the source at `pos` and the
-/// translations) made on the held view where there is one and projected back
-/// ([`GnssResiduals::with_held`]), so that locating and scoring see it as they see the data.
-fn drawn_where_located(
+/// A source family's surrogate for a source at `pos` ([`latent::surrogate`]), beside the main
+/// source's moves ([`beside_main_moves`]).
+pub(super) fn surrogate_at(
     res: &GnssResiduals,
     pos: [f64; 3],
-    draw: impl FnOnce(&GnssResiduals, &[Vec<f64>]) -> GnssResiduals,
+    moves: Moves,
+    rng: &mut StdRng,
 ) -> GnssResiduals {
-    let loc = res.locating();
-    let drawn = draw(loc, &with_translations(loc, pos));
-    if res.held.is_some() {
-        res.with_held(drawn)
-    } else {
-        drawn
+    let keep = with_translations(res, pos);
+    beside_main_moves(res, pos, latent::surrogate(res, &keep, rng), moves)
+}
+
+/// A draw of the residuals (`drawn`, made on them: free of the main source's moves) given back
+/// the held view's part beyond them where there is one ([`GnssResiduals::beside_moves`]): the
+/// main source's moves, as the data hold them, not randomised — they are what a source is located
+/// beside, in the data as in the draw. Randomised, they lose the coherence by which the free
+/// view projects them off, and swell the chance level.
+fn beside_main_moves(
+    res: &GnssResiduals,
+    pos: [f64; 3],
+    drawn: GnssResiduals,
+    moves: Moves,
+) -> GnssResiduals {
+    let Some(held) = res.held.as_deref() else {
+        return drawn;
+    };
+    match moves {
+        Moves::Whole => res.beside_moves(drawn, &held.fit.r),
+        Moves::WithoutSource => {
+            let keep = with_translations(held, pos);
+            let (_, rest) = latent::split_effect(&held.fit.r, held.nc(), &keep);
+            res.beside_moves(drawn, &rest)
+        }
     }
 }
 
@@ -356,7 +389,7 @@ impl Family<GnssResiduals> for SecondSource {
         fit: &SourceFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(surrogate_at(res, fit.pos, rng))
+        Ok(surrogate_at(res, fit.pos, Moves::Whole, rng))
     }
     /// Position, and from the daily volume change of the source (30-day running mean, relative
     /// to its median) the peak and the window around it where the change stays beyond twice its
