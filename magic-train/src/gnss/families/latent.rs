@@ -362,13 +362,7 @@ pub fn persistent_noise(r: &[f64], nc: usize, g: &[f64], a: &[f64]) -> f64 {
 /// given a random sign and direction of time, projected again.
 pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
     let nc = res.nc();
-    let mut r = res.fit.r.clone();
-    for g in patterns {
-        let a = daily_amplitude(&r, nc, g);
-        for (row, at) in r.chunks_mut(nc).zip(&a) {
-            row.iter_mut().zip(g).for_each(|(x, gc)| *x -= at * gc);
-        }
-    }
+    let (_, r) = split_effect(&res.fit.r, nc, patterns);
     let r = flip_reverse(&r, nc, res.ns(), rng);
     res.with_fit(res.project_rows(&r))
 }
