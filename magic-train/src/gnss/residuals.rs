@@ -181,6 +181,15 @@ impl GnssResiduals {
         out
     }
 
+    /// The residuals whose held view is `held` (a draw of [`GnssResiduals::held`] that keeps the
+    /// main source's moves coherent): the analysed block is `held`'s projected off this context's
+    /// tangent, as the data's is the held view's.
+    pub fn with_held(&self, held: GnssResiduals) -> GnssResiduals {
+        let mut out = self.with_fit(self.project_rows(&held.fit.r));
+        out.held = Some(Arc::new(held));
+        out
+    }
+
     /// Where a point source is located: the held view if there is one, else these residuals.
     pub fn locating(&self) -> &GnssResiduals {
         self.held.as_deref().unwrap_or(self)
@@ -617,7 +626,8 @@ mod tests {
     /// The free residuals are the held ones projected off the rest of the main source's span
     /// (the held direction lies within it); a draw of the free residuals given back the held
     /// view's part beyond them ([`GnssResiduals::beside_moves`]) keeps that part as the data
-    /// hold it and is, projected, the draw again.
+    /// hold it and is, projected, the draw again; a draw of the held view projected back
+    /// ([`GnssResiduals::with_held`]) is seen as the data are.
     #[test]
     fn the_free_view_is_the_held_view_projected() {
         let network = Network::akutan();
@@ -662,6 +672,13 @@ mod tests {
         assert!(same.held.is_none(), "no held view, nothing given back");
         free.held = Some(Arc::new(held.clone()));
         assert!(std::ptr::eq(free.locating(), free.held.as_deref().unwrap()));
+        let again = free.with_held(held.clone());
+        let gap = largest(&again.fit.r, &free.fit.r);
+        assert!(gap < 1e-12, "the held view projected back: {gap}");
+        assert_eq!(
+            again.held.as_deref().expect("a held view").fit.r,
+            held.fit.r
+        );
         let out = free.beside_moves(drawn.clone(), &held.fit.r);
         assert_eq!(out.fit.r, drawn.fit.r);
         let out_held = out.held.as_deref().expect("a held view");

@@ -20,10 +20,12 @@
 //! where its field is nearly uniform, nor counts for it. The surrogates remove the translation
 //! before they randomise each station's series (given a random sign per station, a common mode
 //! turns into a coherent pattern chance could credit to a source). The bootstrap of the position
-//! keeps the noise's coherence between stations instead ([`latent::resample_coherent`]). Both
-//! draw on the residuals the source is scored on and keep the held view's part beyond them (the
-//! main source's moves) as the data hold it: the surrogates are located beside the same moves,
-//! and randomised moves would no longer project off and would swell the chance level.
+//! keeps the noise's coherence between stations instead ([`latent::resample_coherent`]). The
+//! surrogates draw on the residuals the source is scored on and keep the held view's part beyond
+//! them (the main source's moves) as the data hold it: they are located beside the same moves,
+//! and moves randomised station by station would no longer project off and would swell the
+//! chance level. The bootstrap draws on the held view with phases shared by every channel, which
+//! keep those moves in the main source's span, and varies them with the noise.
 
 use super::latent::{self, round3, Cross};
 use crate::analysis::projection::{orthonormal, project, scaled};
@@ -314,16 +316,19 @@ pub(super) enum Moves {
 }
 
 /// The bootstrap draw of a source at `pos`: the source and the translations kept, the rest
-/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]), beside
-/// the main source's moves as the data hold them ([`beside_main_moves`]).
+/// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]). Drawn
+/// where the source is located ([`GnssResiduals::locating`]) and projected back
+/// ([`GnssResiduals::with_held`]): shared phases keep the main source's moves in its span, so
+/// they still project off, while the draw varies them as it varies the noise — kept as the data
+/// hold them (as the surrogates keep them), every draw locates the source beside the same moves
+/// and the spread comes out too small.
 pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    let keep = with_translations(res, pos);
-    beside_main_moves(
-        res,
-        pos,
-        latent::resample_coherent(res, &keep, rng),
-        Moves::Whole,
-    )
+    let loc = res.locating();
+    let drawn = latent::resample_coherent(loc, &with_translations(loc, pos), rng);
+    match res.held {
+        Some(_) => res.with_held(drawn),
+        None => drawn,
+    }
 }
 
 /// A source family's surrogate for a source at `pos` ([`latent::surrogate`]), beside the main
