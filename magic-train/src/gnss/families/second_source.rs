@@ -319,9 +319,9 @@ pub(super) enum Moves {
 /// phase-randomised with phases shared by every channel ([`latent::resample_coherent`]). Drawn
 /// where the source is located ([`GnssResiduals::locating`]) and projected back
 /// ([`GnssResiduals::with_held`]): shared phases keep the main source's moves in its span, so
-/// they still project off, while the draw varies them as it varies the noise — kept as the data
-/// hold them (as the surrogates keep them), every draw locates the source beside the same moves
-/// and the spread comes out too small.
+/// they still project off, while the draw varies them as it varies the noise. Kept as the data
+/// hold them (as the surrogates keep them), every draw would locate the source beside the same
+/// moves, and the spread would come out too small.
 pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
     let loc = res.locating();
     let drawn = latent::resample_coherent(loc, &with_translations(loc, pos), rng);
