@@ -304,8 +304,8 @@ pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
     vec![("x_km", pos[0]), ("y_km", pos[1]), ("depth_km", pos[2])]
 }
 
-/// What a source family's draw keeps of the held view's part beyond the residuals (the main
-/// source's moves; [`beside_main_moves`]).
+/// What a source family's surrogate keeps of the held view's part beyond the residuals (the main
+/// source's moves; [`beside_main_moves`]; the bootstrap draws on the held view, [`resample_at`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Moves {
     /// All of it: the family reads the held view only to locate a source.
@@ -346,8 +346,9 @@ pub(super) fn surrogate_at(
 /// A draw of the residuals (`drawn`, made on them: free of the main source's moves) given back
 /// the held view's part beyond them where there is one ([`GnssResiduals::beside_moves`]): the
 /// main source's moves, as the data hold them, not randomised — they are what a source is located
-/// beside, in the data as in the draw. Randomised, they lose the coherence by which the free
-/// view projects them off, and swell the chance level.
+/// beside, in the data as in the draw. Randomised station by station (as the surrogates' flips
+/// would), they lose the coherence by which the free view projects them off, and swell the
+/// chance level.
 fn beside_main_moves(
     res: &GnssResiduals,
     pos: [f64; 3],
