@@ -9,7 +9,7 @@
 
 use magic_train::gnss::recovery::check_one;
 use magic_train::gnss::synth::{self, Scenario, Spec};
-use magic_train::{AnalysisOptions, MainSource, OwnedEffect, TrainConfig};
+use magic_train::{AnalysisOptions, OwnedEffect, TrainConfig};
 
 /// The step offset in the analysis report (JSON) against the effect's f32 offset (mm): the report
 /// rounds to 3 decimals (±5e-4 mm), the effect holds f32; measured 2.5e-4.
@@ -113,15 +113,12 @@ fn drift_is_found_at_its_stations() {
     check(Scenario::Drift);
 }
 
-/// A pulse 2–4 km from the main source is mostly a move of it: with the main source held in
-/// place (`--main-source held`) it stays in the residuals and is found and located.
+/// A pulse 2–4 km from the main source is mostly a move of it: located and scored with the main
+/// source held in place (the default analysis does so for `second_source`), it is found and
+/// located.
 #[test]
-fn a_near_source_is_found_with_the_main_source_held() {
-    let opts = AnalysisOptions {
-        main_source: MainSource::Held,
-        ..AnalysisOptions::default()
-    };
-    check_with(Scenario::SecondSourceNear, &opts);
+fn a_near_source_is_found_where_the_main_source_is_held() {
+    check(Scenario::SecondSourceNear);
 }
 
 #[test]

@@ -30,10 +30,10 @@ use std::path::Path;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum MainSource {
     /// Free to move every day, as the encoder moves it: whatever its position, depth or volume
-    /// can produce is projected off the residuals. A point source is located with the main
-    /// source held (its field near the main one kept whole, so its depth is fixed) and scored
-    /// on what is left once the main source is free: only what no move of the main source can
-    /// produce counts for it.
+    /// can produce is projected off the residuals. Point sources are located with the main
+    /// source held (their field near the main one kept whole, so their depth is fixed); a
+    /// second source's episode is scored there too, a lasting source on what is left once the
+    /// main source is free.
     #[default]
     Free,
     /// Held in place, its volume changing: only its field's direction is projected off, so a

@@ -20,8 +20,8 @@
 //! source whose volume changes where it is). Free, a second source 2–4 km from the main one is
 //! mostly a move of it: what is left of its field looks like a shallower source, so free
 //! residuals carry a held view too ([`GnssResiduals::held`]), where the point-source families
-//! locate a source before scoring it on the free residuals. Held, a second source stays in the
-//! residuals whole, and so does a main source that really moves between its episodes.
+//! locate a source (and `second_source` scores its episode). Held, a second source stays in
+//! the residuals whole, and so does a main source that really moves between its episodes.
 
 use super::{GnssProblem, Network};
 use crate::analysis::projection::{orthonormal, project, scaled};

@@ -24,7 +24,7 @@
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
-    surrogate_at, translations, Moves,
+    surrogate_beside_moves, translations,
 };
 use crate::analysis::score::weighted_gain;
 use crate::analysis::{Family, Rejection};
@@ -289,7 +289,7 @@ impl Family<GnssResiduals> for LastingSource {
         fit: &LastingFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(surrogate_at(res, fit.pos, Moves::WithoutSource, rng))
+        Ok(surrogate_beside_moves(res, fit.pos, rng))
     }
     /// Position; onset (the scanned epoch: for a change that builds over months, near its
     /// middle), start and end of the change (the day after the last one before the onset on
