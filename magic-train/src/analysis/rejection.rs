@@ -44,6 +44,14 @@ pub enum Rejection {
         /// The surrogates' largest.
         largest: f64,
     },
+    /// A source whose field is mostly what a move of the main source produces: the share of it
+    /// no such move can produce is below the least that tells the two apart.
+    Unresolvable {
+        /// The share of its field (in norm) beyond the main source's span.
+        share: f64,
+        /// The least share accepted.
+        least: f64,
+    },
     /// Taken for part of another candidate's effect (a step at a lasting source's onset), in
     /// words that name it ([`Problem::reconcile`](crate::problem::Problem::reconcile)).
     PartOf(String),
@@ -92,6 +100,11 @@ impl fmt::Display for Rejection {
                 "detection statistic {statistic:.3} not above the surrogates' largest, \
                  {largest:.3}"
             ),
+            Rejection::Unresolvable { share, least } => write!(
+                f,
+                "its field mostly a move of the main source ({share:.2} of it beyond, at least \
+                 {least:.2} needed)"
+            ),
             Rejection::PartOf(why) => f.write_str(why),
         }
     }
@@ -128,6 +141,15 @@ mod tests {
         };
         assert_eq!(stat.bound(), None);
         assert_eq!(Rejection::PartOf("its onset".into()).bound(), None);
+        let near = Rejection::Unresolvable {
+            share: 0.13,
+            least: 0.25,
+        };
+        assert_eq!(near.bound(), None);
+        assert_eq!(
+            near.to_string(),
+            "its field mostly a move of the main source (0.13 of it beyond, at least 0.25 needed)"
+        );
     }
 
     #[test]

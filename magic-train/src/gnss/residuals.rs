@@ -99,6 +99,10 @@ pub struct Context {
     /// typical state: the main source's (free or held, [`MainSource`]) and the declared latent
     /// effects'.
     pub tangent: Vec<Vec<f64>>,
+    /// Orthonormal basis (standardised units) of the main source's own span around its typical
+    /// state — its position, depth and volume, whether the analysis holds it or not: what a
+    /// second source's field must not be mostly made of to be told from a move of it.
+    pub source_span: Vec<Vec<f64>>,
     /// Sum of squares of the analysed days' (real) residuals: the denominator of the latent
     /// families' shares, for the data and its surrogates alike.
     pub total_fit: f64,
@@ -345,6 +349,7 @@ pub fn residuals(
         scale,
         mse,
         main,
+        source_span: orthonormal(&columns[..SOURCE_VARIABLES.min(columns.len())], 1e-9, 1),
         splits,
         days: &days,
     };
@@ -369,6 +374,7 @@ struct Shared<'a> {
     scale: &'a [f64],
     mse: f64,
     main: [f64; 3],
+    source_span: Vec<Vec<f64>>,
     splits: &'a [SplitName],
     days: &'a [f64],
 }
@@ -403,6 +409,7 @@ fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssR
             mse: shared.mse,
             main_source: shared.main,
             tangent,
+            source_span: shared.source_span.clone(),
             total_fit,
             splits: shared.splits.to_vec(),
             source_grid: OnceLock::new(),
@@ -623,6 +630,59 @@ mod tests {
         assert!(held_source(&with_up, &translations, &rows).is_none());
     }
 
+    /// A source's resolvable share (`second_source::resolvable`): none at the main source itself
+    /// (its field is the volume's direction), little beside it at its depth, most far from it —
+    /// and, channels weighted as the synthetic generator weighs them, the generator's own measure.
+    #[test]
+    fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
+        use crate::gnss::families::second_source::resolvable;
+        use magic_core::mogi::{field_jacobian, N_PARAMS};
+        let network = Network::akutan();
+        let (ns, nc) = (network.len(), 3 * network.len());
+        let main = crate::gnss::synth::SOURCE;
+        let scale: Vec<f64> = (0..nc).map(|c| [1.2, 1.2, 3.5][c / ns]).collect();
+        let (mut out, mut jac) = (vec![0.0; nc], vec![[0.0; N_PARAMS]; nc]);
+        field_jacobian(
+            &network.stations,
+            &[main[0], main[1], main[2], 1.0],
+            &mut out,
+            &mut jac,
+        )
+        .unwrap();
+        let columns: Vec<(Vec<f64>, f64)> = (0..N_PARAMS)
+            .map(|j| scaled((0..nc).map(|c| jac[c][j] / scale[c]).collect()))
+            .collect();
+        let rows = vec![vec![0.0; nc]; 10];
+        let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+        let shared = Shared {
+            network: &network,
+            scale: &scale,
+            mse: 0.0,
+            main: [main[0], main[1], main[2]],
+            source_span: orthonormal(&columns, 1e-9, 2),
+            splits: &[SplitName::Train],
+            days: &days,
+        };
+        let res = view(&shared, &rows, Vec::new());
+        let at = |p: [f64; 3]| resolvable(&res, p);
+        assert!(at([main[0], main[1], main[2]]) < 1e-6);
+        assert!(at([main[0], main[1] + 3.0, main[2]]) < 0.25);
+        assert!(at([main[0] + 10.0, main[1] - 4.0, 5.0]) > 0.5);
+        for p in [
+            [2.5, 2.0, 3.5],
+            [-1.5, 2.0, 3.0],
+            [8.0, -3.0, 6.0],
+            [0.3, 3.2, 7.0],
+        ] {
+            let generator = crate::gnss::synth::resolvable(&network.stations, p);
+            assert!(
+                (at(p) - generator).abs() < 1e-6,
+                "{p:?}: {} vs {generator}",
+                at(p)
+            );
+        }
+    }
+
     /// The free residuals are the held ones projected off the rest of the main source's span
     /// (the held direction lies within it); a draw of the free residuals given back the held
     /// view's part beyond them ([`GnssResiduals::beside_moves`]) keeps that part as the data
@@ -652,6 +712,7 @@ mod tests {
             scale: &scale,
             mse: 0.0,
             main: [0.0; 3],
+            source_span: Vec::new(),
             splits: &[SplitName::Train],
             days: &days,
         };

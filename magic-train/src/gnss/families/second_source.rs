@@ -15,7 +15,10 @@
 //! there it drifts to the grid's shallowest bound, and scored there, a pulse that moved the
 //! nearest stations by centimetres explains less than chance (on trial seeds 101–105, near and
 //! far pulses under the `red` generator were found in 8 of 15 each, held in 14 and 15). The
-//! surrogates and the bootstrap are drawn on the same view. Patterns are projected off the
+//! surrogates and the bootstrap are drawn on the same view. There a move of the main source
+//! counts whole too, and a main source that moves between its episodes shows as a source beside
+//! it: a candidate whose field is mostly such a move ([`resolvable`] below [`MIN_RESOLVABLE`])
+//! is rejected, as one on the bound of the grid is. Patterns are projected off the
 //! network's translations as well as off F's tangent space, and each held-out station's
 //! prediction fits the translation as a nuisance: a persistent common mode (reference frame,
 //! loading) neither draws the source to the deepest, farthest point, where its field is nearly
@@ -48,6 +51,12 @@ pub const GRID_MARGIN_KM: f64 = 3.0;
 pub const GRID_DEPTHS: [f64; 13] = [
     2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0,
 ];
+/// Least share (in norm, standardised units) of a second source's field that no move of the main
+/// source produces ([`resolvable`]): below it, more than 15/16 of the field's energy is such a
+/// move, and the source cannot be told from the main one moving between its episodes. (The
+/// synthetic near sources are drawn with at least this share at the true main source,
+/// `synth::inject::second_source::MIN_RESOLVABLE_NEAR`.)
+pub const MIN_RESOLVABLE: f64 = 0.25;
 /// A refined position closer than this (km) to a face of the grid's box sits on its bound.
 pub const BOUND_TOLERANCE_KM: f64 = 0.25;
 
@@ -293,6 +302,39 @@ pub(super) fn on_bound(pts: &[[f64; 3]], pos: [f64; 3]) -> Option<Rejection> {
         })
 }
 
+/// The share (in norm) of the field of a source at `pos` (standardised units) that lies beyond
+/// the main source's own span ([`Context::source_span`](crate::gnss::residuals::Context)): what
+/// no move of the main source produces to first order; 0 for a field it produces entirely.
+pub fn resolvable(res: &GnssResiduals, pos: [f64; 3]) -> f64 {
+    let mut u = vec![0.0; res.nc()];
+    if mogi::field(
+        &res.ctx.network.stations,
+        &[pos[0], pos[1], pos[2], 1.0],
+        &mut u,
+    )
+    .is_err()
+    {
+        return 0.0;
+    }
+    let g: Vec<f64> = u.iter().zip(&res.ctx.scale).map(|(v, s)| v / s).collect();
+    let norm2 = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+    let total = norm2(&g);
+    if total <= 0.0 {
+        return 0.0;
+    }
+    (norm2(&project(&res.ctx.source_span, &g)) / total).sqrt()
+}
+
+/// Why a second source at `pos` is not a discovery: its field mostly a move of the main source
+/// ([`resolvable`] below [`MIN_RESOLVABLE`]).
+fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
+    let share = resolvable(res, pos);
+    (share < MIN_RESOLVABLE).then_some(Rejection::Unresolvable {
+        share,
+        least: MIN_RESOLVABLE,
+    })
+}
+
 /// The coordinates' names in [`on_bound`]'s rejections.
 const COORDINATES: [&str; 3] = ["x", "y", "depth"];
 
@@ -425,8 +467,12 @@ impl Family<GnssResiduals> for SecondSource {
             "neighbour_days": fit.window,
         })
     }
+    /// On the bound of its grid, or its field mostly a move of the main source: scored where the
+    /// main source is held, such a move counts whole, and a main source that moves between its
+    /// episodes would show as a source beside it.
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<Rejection> {
-        on_bound(&grid(res.locating()).points, fit.pos)
+        let res = res.locating();
+        on_bound(&grid(res).points, fit.pos).or_else(|| unresolvable(res, fit.pos))
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
