@@ -14,7 +14,7 @@
 //! Projected off its every move, a source 2–12 km from it keeps too little of its field: located
 //! there it drifts to the grid's shallowest bound, and scored there, a pulse that moved the
 //! nearest stations by centimetres explains less than chance (on trial seeds 101–105, near and
-//! far pulses under the `red` generator were found in 8 of 15 each, held in 14 and 15). The
+//! far pulses under the `red` generator were found in 8 of 15 each, held in 13 and 15). The
 //! surrogates and the bootstrap are drawn on the same view. There a move of the main source
 //! counts whole too, and a main source that moves between its episodes shows as a source beside
 //! it: a candidate whose field is mostly such a move ([`resolvable`] below [`MIN_RESOLVABLE`])
