@@ -344,16 +344,23 @@ pub fn residuals(
             Ok((0..nc).map(|c| (d.obs[c] - f[c]) / scale[c]).collect())
         })
         .collect::<Result<_>>()?;
+    let k = SOURCE_VARIABLES.min(columns.len());
     let shared = Shared {
         network: &p.network,
         scale,
         mse,
         main,
-        source_span: orthonormal(&columns[..SOURCE_VARIABLES.min(columns.len())], 1e-9, 1),
+        source_span: orthonormal(&columns[..k], 1e-9, 1),
         splits,
         days: &days,
     };
-    let held = held_tangent(&columns, scale, p.network.len(), &rows);
+    let held = held_tangent(
+        &shared.source_span,
+        &columns[k..],
+        scale,
+        p.network.len(),
+        &rows,
+    );
     Ok(match mode {
         MainSource::Held => view(
             &shared,
@@ -455,21 +462,23 @@ fn jacobian_columns(
 /// network's translations as nuisances) and the declared latent effects' directions. (A span
 /// that holds a translation cannot tell the source from a common mode: then the source is left
 /// free to move, its whole span projected off: `None`.)
+///
+/// `source` is the main source's span (orthonormal), `latent` the declared latent effects'
+/// columns.
 fn held_tangent(
-    columns: &[(Vec<f64>, f64)],
+    source: &[Vec<f64>],
+    latent: &[(Vec<f64>, f64)],
     scale: &[f64],
     ns: usize,
     rows: &[Vec<f64>],
 ) -> Option<Vec<Vec<f64>>> {
-    let k = SOURCE_VARIABLES.min(columns.len());
-    let source = orthonormal(&columns[..k], 1e-9, 1);
-    let latent = orthonormal(&columns[k..], 1e-9, 1);
+    let latent = orthonormal(latent, 1e-9, 1);
     let unit =
         |v: &[Vec<f64>]| -> Vec<(Vec<f64>, f64)> { v.iter().map(|q| (q.clone(), 1.0)).collect() };
     let mut nuisance = translation_basis(scale, ns);
     nuisance.extend(latent.iter().cloned());
     let nuisance = orthonormal(&unit(&nuisance), 1e-9, 2);
-    let mut tangent = vec![held_source(&source, &nuisance, rows)?];
+    let mut tangent = vec![held_source(source, &nuisance, rows)?];
     tangent.extend(latent);
     Some(orthonormal(&unit(&tangent), 1e-9, 2))
 }
@@ -716,7 +725,9 @@ mod tests {
             splits: &[SplitName::Train],
             days: &days,
         };
-        let held = held_tangent(&columns, &scale, ns, &rows).expect("held in place");
+        let source = orthonormal(&columns[..SOURCE_VARIABLES], 1e-9, 1);
+        let held = held_tangent(&source, &columns[SOURCE_VARIABLES..], &scale, ns, &rows)
+            .expect("held in place");
         let held = view(&shared, &rows, held);
         let mut free = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
         let largest = |a: &[f64], b: &[f64]| {

@@ -24,7 +24,7 @@
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
-    surrogate_beside_moves, translations,
+    translations, with_translations,
 };
 use crate::analysis::score::weighted_gain;
 use crate::analysis::{Family, Rejection};
@@ -259,6 +259,24 @@ fn search(res: &GnssResiduals) -> LastingFit {
     let mut best = best.unwrap_or_default();
     best.score /= res.ctx.total_fit.max(1e-300);
     best
+}
+
+/// The lasting source's surrogate for a source at `pos` ([`latent::surrogate`]) where it is
+/// scored, given back the held view's part beyond these residuals — the main source's moves, as
+/// the data hold them, without the daily fit of the source (and the translations) there
+/// ([`GnssResiduals::beside_moves`]): they are what the source is located beside, in the data as
+/// in the draw. Randomised station by station (as the surrogates' flips would), they lose the
+/// coherence by which the free view projects them off, and swell the chance level; the source's
+/// own fit is left out because the family also scores a statistic on the held view, which must
+/// not find the source in its own surrogates.
+fn surrogate_beside_moves(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
+    let drawn = latent::surrogate(res, &with_translations(res, pos), rng);
+    let Some(held) = res.held.as_deref() else {
+        return drawn;
+    };
+    let keep = with_translations(held, pos);
+    let (_, rest) = latent::split_effect(&held.fit.r, held.nc(), &keep);
+    res.beside_moves(drawn, &rest)
 }
 
 impl Family<GnssResiduals> for LastingSource {

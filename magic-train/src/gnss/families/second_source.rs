@@ -87,17 +87,15 @@ pub fn pattern(res: &GnssResiduals, p: [f64; 3]) -> Vec<f64> {
 
 /// [`pattern`] projected off `basis`.
 fn pattern_off(res: &GnssResiduals, basis: &[Vec<f64>], p: [f64; 3]) -> Vec<f64> {
+    unit_field(res, p).map_or_else(|| vec![0.0; res.nc()], |g| project(basis, &g))
+}
+
+/// The field of a unit volume change at `p` in standardised units, unprojected (`None` where
+/// Mogi's field is undefined).
+fn unit_field(res: &GnssResiduals, p: [f64; 3]) -> Option<Vec<f64>> {
     let mut u = vec![0.0; res.nc()];
-    if mogi::field(&res.ctx.network.stations, &[p[0], p[1], p[2], 1.0], &mut u).is_err() {
-        return vec![0.0; res.nc()];
-    }
-    project(
-        basis,
-        &u.iter()
-            .zip(&res.ctx.scale)
-            .map(|(v, s)| v / s)
-            .collect::<Vec<_>>(),
-    )
+    mogi::field(&res.ctx.network.stations, &[p[0], p[1], p[2], 1.0], &mut u).ok()?;
+    Some(u.iter().zip(&res.ctx.scale).map(|(v, s)| v / s).collect())
 }
 
 /// Orthonormal basis of F's tangent space and the network's translations (1 mm on every
@@ -249,21 +247,19 @@ pub(super) fn distinct_best(
 }
 
 /// Candidate positions: per neighbour window, the grid points along whose pattern the
-/// residuals' persistent variance is largest ([`latent::persistent_along`], all stations, on
-/// [`GnssResiduals::locating`]: with the main source held), the best few (distinct) refined
-/// locally; the candidate whose leave-one-station-out gain over its best interval of days
-/// ([`latent::best_interval_gain`], on `res` itself) is largest wins. `xs` are the locating
-/// residuals' windows.
+/// residuals' persistent variance is largest ([`latent::persistent_along`], all stations), the
+/// best few (distinct) refined locally; the candidate whose leave-one-station-out gain over its
+/// best interval of days ([`latent::best_interval_gain`]) is largest wins. `res` is the view the
+/// source is located and scored on ([`GnssResiduals::locating`]); `xs` are its windows.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     let (ns, nc) = (res.ns(), res.nc());
     let r = latent::highpass(&res.fit.r, nc, latent::LATENT_HIGHPASS_DAYS);
     let ts = translations(res);
-    let loc = res.locating();
     let SourceGrid {
         points: pts,
         patterns,
         ..
-    } = grid(loc);
+    } = grid(res);
     let mut best = SourceFit::default();
     for (w, x) in xs {
         let scored = patterns
@@ -272,7 +268,7 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             .map(|(pi, g)| (latent::persistent_along(g, x), pi))
             .collect();
         for (q0, pi) in distinct_best(scored, pts, SOURCE_CANDIDATES) {
-            let (pos, _) = refine(loc, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
+            let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
             let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, *w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
             if gain > best.score {
@@ -306,23 +302,13 @@ pub(super) fn on_bound(pts: &[[f64; 3]], pos: [f64; 3]) -> Option<Rejection> {
 /// the main source's own span ([`Context::source_span`](crate::gnss::residuals::Context)): what
 /// no move of the main source produces to first order; 0 for a field it produces entirely.
 pub fn resolvable(res: &GnssResiduals, pos: [f64; 3]) -> f64 {
-    let mut u = vec![0.0; res.nc()];
-    if mogi::field(
-        &res.ctx.network.stations,
-        &[pos[0], pos[1], pos[2], 1.0],
-        &mut u,
-    )
-    .is_err()
-    {
-        return 0.0;
-    }
-    let g: Vec<f64> = u.iter().zip(&res.ctx.scale).map(|(v, s)| v / s).collect();
     let norm2 = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
-    let total = norm2(&g);
-    if total <= 0.0 {
-        return 0.0;
+    match unit_field(res, pos) {
+        Some(g) if norm2(&g) > 0.0 => {
+            (norm2(&project(&res.ctx.source_span, &g)) / norm2(&g)).sqrt()
+        }
+        _ => 0.0,
     }
-    (norm2(&project(&res.ctx.source_span, &g)) / total).sqrt()
 }
 
 /// Why a second source at `pos` is not a discovery: its field mostly a move of the main source
@@ -357,28 +343,6 @@ pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) 
         Some(_) => res.with_held(drawn),
         None => drawn,
     }
-}
-
-/// The lasting source's surrogate for a source at `pos` ([`latent::surrogate`]) where it is
-/// scored, given back the held view's part beyond these residuals — the main source's moves, as
-/// the data hold them, without the daily fit of the source (and the translations) there
-/// ([`GnssResiduals::beside_moves`]): they are what the source is located beside, in the data as
-/// in the draw. Randomised station by station (as the surrogates' flips would), they lose the
-/// coherence by which the free view projects them off, and swell the chance level; the source's
-/// own fit is left out because the family also scores a statistic on the held view, which must
-/// not find the source in its own surrogates.
-pub(super) fn surrogate_beside_moves(
-    res: &GnssResiduals,
-    pos: [f64; 3],
-    rng: &mut StdRng,
-) -> GnssResiduals {
-    let drawn = latent::surrogate(res, &with_translations(res, pos), rng);
-    let Some(held) = res.held.as_deref() else {
-        return drawn;
-    };
-    let keep = with_translations(held, pos);
-    let (_, rest) = latent::split_effect(&held.fit.r, held.nc(), &keep);
-    res.beside_moves(drawn, &rest)
 }
 
 /// The effect that adds a source at `pos` to F, if it explains anything (`score > 0`).
