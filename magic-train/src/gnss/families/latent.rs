@@ -62,6 +62,16 @@ impl Prefix {
         Prefix { nc, t_n, sum }
     }
 
+    /// Number of rows.
+    pub(super) fn rows(&self) -> usize {
+        self.t_n
+    }
+
+    /// Number of channels.
+    pub(super) fn channels(&self) -> usize {
+        self.nc
+    }
+
     /// Sum of channel c over rows `lo..hi`.
     pub(super) fn sum(&self, c: usize, lo: usize, hi: usize) -> f64 {
         self.sum[hi * self.nc + c] - self.sum[lo * self.nc + c]
