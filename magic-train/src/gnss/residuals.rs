@@ -644,7 +644,7 @@ mod tests {
     /// and, channels weighted as the synthetic generator weighs them, the generator's own measure.
     #[test]
     fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
-        use crate::gnss::families::second_source::resolvable;
+        use crate::gnss::families::second_source::{rejection, resolvable};
         use magic_core::mogi::{field_jacobian, N_PARAMS};
         let network = Network::akutan();
         let (ns, nc) = (network.len(), 3 * network.len());
@@ -677,6 +677,17 @@ mod tests {
         assert!(at([main[0], main[1], main[2]]) < 1e-6);
         assert!(at([main[0], main[1] + 3.0, main[2]]) < 0.25);
         assert!(at([main[0] + 10.0, main[1] - 4.0, 5.0]) > 0.5);
+        // The search prefers a candidate no rule rejects: the move, and the grid's deepest
+        // bound, are rejected; the far source is not.
+        use crate::analysis::{Rejection, Side};
+        let beside = rejection(&res, [main[0], main[1] + 3.0, main[2]]);
+        assert!(
+            matches!(beside, Some(Rejection::Unresolvable { .. })),
+            "{beside:?}"
+        );
+        let deepest = rejection(&res, [main[0] + 10.0, main[1] - 4.0, 20.0]);
+        assert_eq!(deepest.and_then(|r| r.bound()), Some(("depth", Side::High)));
+        assert_eq!(rejection(&res, [main[0] + 10.0, main[1] - 4.0, 5.0]), None);
         for p in [
             [2.5, 2.0, 3.5],
             [-1.5, 2.0, 3.0],

@@ -18,7 +18,8 @@
 //! surrogates and the bootstrap are drawn on the same view. There a move of the main source
 //! counts whole too, and a main source that moves between its episodes shows as a source beside
 //! it: a candidate whose field is mostly such a move ([`resolvable`] below [`MIN_RESOLVABLE`])
-//! is rejected, as one on the bound of the grid is. Patterns are projected off the
+//! is rejected, as one on the bound of the grid is, and the search keeps the best candidate
+//! neither rule rejects before any that one does. Patterns are projected off the
 //! network's translations as well as off F's tangent space, and each held-out station's
 //! prediction fits the translation as a nuisance: a persistent common mode (reference frame,
 //! loading) neither draws the source to the deepest, farthest point, where its field is nearly
@@ -249,8 +250,10 @@ pub(super) fn distinct_best(
 /// Candidate positions: per neighbour window, the grid points along whose pattern the
 /// residuals' persistent variance is largest ([`latent::persistent_along`], all stations), the
 /// best few (distinct) refined locally; the candidate whose leave-one-station-out gain over its
-/// best interval of days ([`latent::best_interval_gain`]) is largest wins. `res` is the view the
-/// source is located and scored on ([`GnssResiduals::locating`]); `xs` are its windows.
+/// best interval of days ([`latent::best_interval_gain`]) is largest wins — of those no rule
+/// rejects, if any: a candidate on the grid's bound or mostly a move of the main source is no
+/// discovery, and must not hide one that may be. `res` is the view the source is located and
+/// scored on ([`GnssResiduals::locating`]); `xs` are its windows.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     let (ns, nc) = (res.ns(), res.nc());
     let r = latent::highpass(&res.fit.r, nc, latent::LATENT_HIGHPASS_DAYS);
@@ -260,7 +263,9 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
         patterns,
         ..
     } = grid(res);
-    let mut best = SourceFit::default();
+    // (admissible, fit): a candidate no rule rejects ([`rejection`]) beats one a rule does,
+    // whatever their gains.
+    let mut best = (false, SourceFit::default());
     for (w, x) in xs {
         let scored = patterns
             .par_iter()
@@ -271,15 +276,20 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
             let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, *w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
-            if gain > best.score {
-                best = SourceFit {
-                    pos,
-                    window: *w,
-                    score: gain,
-                };
+            let ok = rejection(res, pos).is_none();
+            if (ok, gain) > (best.0, best.1.score) {
+                best = (
+                    ok,
+                    SourceFit {
+                        pos,
+                        window: *w,
+                        score: gain,
+                    },
+                );
             }
         }
     }
+    let mut best = best.1;
     best.score /= res.ctx.total_fit.max(1e-300);
     best
 }
@@ -319,6 +329,13 @@ fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
         share,
         least: MIN_RESOLVABLE,
     })
+}
+
+/// Why a second source at `pos` is no discovery where it is located (`res`), if it is not: on
+/// the bound of the search grid, or its field mostly a move of the main source ([`resolvable`]
+/// below [`MIN_RESOLVABLE`]).
+pub fn rejection(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
+    on_bound(&grid(res).points, pos).or_else(|| unresolvable(res, pos))
 }
 
 /// The coordinates' names in [`on_bound`]'s rejections.
@@ -435,8 +452,7 @@ impl Family<GnssResiduals> for SecondSource {
     /// main source is held, such a move counts whole, and a main source that moves between its
     /// episodes would show as a source beside it.
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<Rejection> {
-        let res = res.locating();
-        on_bound(&grid(res).points, fit.pos).or_else(|| unresolvable(res, fit.pos))
+        rejection(res.locating(), fit.pos)
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
