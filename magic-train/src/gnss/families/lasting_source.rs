@@ -16,8 +16,8 @@
 //! different stations only — and the best point at each of the few epochs where its change
 //! would gain most on held-out stations, so that one change cannot hide another at a different
 //! time: ranked by the offsets, the main source's own episodes, which the held view keeps, took
-//! every place (trial seeds 101–105: far deflations under `red` found in 9 of 15 so, in 14 this
-//! way; all lasting trials 33 → 36 of 60). Each is scored by
+//! every place (trial seeds 101–105: far deflations under `red` found in 9 of 15 that way, in 14
+//! this way; all lasting trials 33 → 36 of 60). Each is scored by
 //! predicting every station from the others (`lasting_gain`); the network translations are a
 //! nuisance there and are removed before the surrogates randomise each station's series, as for
 //! the second source. The scan's value at the fit is the family's detection statistic: standing
