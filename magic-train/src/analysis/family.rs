@@ -45,7 +45,7 @@ pub trait Family<R>: Sync {
     /// a level that wanders for years explains held-out days like a step, but only a step is
     /// sharper than the noise makes its local jumps); `None` for most families.
     /// A statistic that stands out of the surrogates' by a margin like the score's
-    /// ([`stands_out`](super::stands_out)) makes the fit significant once its
+    /// ([`stands_out`]) makes the fit significant once its
     /// held-out score exceeds chance at all: a local effect (a step in the record's last
     /// months) can be clear and still explain little of the whole network's variance.
     fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
