@@ -125,10 +125,9 @@ pub struct SynthCheckCmd {
     #[arg(long, default_value_t = 15)]
     epochs: usize,
     /// The volcano's main source in the residual analysis: `free` to move every day (whatever
-    /// moving it produces is projected off; point sources are located with it held, a second
-    /// source's episode also scored there, a lasting source on the rest) or `held` in
-    /// place (only its field's direction is projected off, so a second source near it stays
-    /// visible and counts whole).
+    /// moving it produces is projected off; point sources are located and scored with it held) or
+    /// `held` in place (only its field's direction is projected off, so a second source near
+    /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
     /// Write the table (Markdown) here too.
@@ -220,10 +219,9 @@ pub struct SynthLoopCmd {
     #[arg(long, default_value_t = 3)]
     rounds: usize,
     /// The volcano's main source in the residual analysis: `free` to move every day (whatever
-    /// moving it produces is projected off; point sources are located with it held, a second
-    /// source's episode also scored there, a lasting source on the rest) or `held` in
-    /// place (only its field's direction is projected off, so a second source near it stays
-    /// visible and counts whole).
+    /// moving it produces is projected off; point sources are located and scored with it held) or
+    /// `held` in place (only its field's direction is projected off, so a second source near
+    /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
     /// Folder for each run's loop report (and the tables).

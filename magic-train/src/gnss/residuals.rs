@@ -688,6 +688,29 @@ mod tests {
         let deepest = rejection(&res, [main[0] + 10.0, main[1] - 4.0, 20.0]);
         assert_eq!(deepest.and_then(|r| r.bound()), Some(("depth", Side::High)));
         assert_eq!(rejection(&res, [main[0] + 10.0, main[1] - 4.0, 5.0]), None);
+        // A lasting source is held to the same rules, on its own (shallower) grid.
+        use crate::analysis::Family;
+        use crate::gnss::families::lasting_source::{LastingFit, LastingSource};
+        let lasting = |pos: [f64; 3]| {
+            LastingSource.reject(
+                &res,
+                &LastingFit {
+                    pos,
+                    ..LastingFit::default()
+                },
+            )
+        };
+        let beside = lasting([main[0], main[1] + 3.0, main[2]]);
+        assert!(
+            matches!(beside, Some(Rejection::Unresolvable { .. })),
+            "{beside:?}"
+        );
+        let shallowest = lasting([main[0] + 10.0, main[1] - 4.0, 1.0]);
+        assert_eq!(
+            shallowest.and_then(|r| r.bound()),
+            Some(("depth", Side::Low))
+        );
+        assert_eq!(lasting([main[0] + 10.0, main[1] - 4.0, 5.0]), None);
         for p in [
             [2.5, 2.0, 3.5],
             [-1.5, 2.0, 3.0],

@@ -8,26 +8,29 @@
 //! has its own chance level: judged against the other's surrogate scores, either would be lost
 //! in the other's chance.
 //!
-//! **Located on all stations, scored on held-out ones.** Candidates are the grid points (the
-//! second source's grid reaching shallower, [`LASTING_DEPTHS`]; its bound rule, refinement and
-//! held view of the residuals for locating) whose pattern the network's offsets at some epoch
-//! follow best — mean over [`SCAN_DAYS`] days
-//! after less mean over those before, every [`SCAN_SPACING`] days, counting products of
-//! different stations only — and the best point at each of the few epochs where its change
-//! would gain most on held-out stations, so that one change cannot hide another at a different
-//! time: ranked by the offsets, the main source's own episodes, which the held view keeps, took
-//! every place (trial seeds 101–105: far deflations under `red` found in 9 of 15 that way, in 14
-//! this way; all lasting trials 33 → 36 of 60). Each is scored by
-//! predicting every station from the others (`lasting_gain`); the network translations are a
-//! nuisance there and are removed before the surrogates randomise each station's series, as for
-//! the second source. The scan's value at the fit is the family's detection statistic: standing
-//! out of the surrogates', it makes a score merely above chance significant, as a step's does;
-//! unlike a step's, it never rejects a score beyond its margin.
+//! **Located and scored on held-out stations, on the held view.** Candidates are the grid
+//! points (the second source's grid reaching shallower, [`LASTING_DEPTHS`]) whose pattern the
+//! network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days after less mean
+//! over those before, every [`SCAN_SPACING`] days, counting products of different stations only
+//! — and the best point at each of the few epochs where its change would gain most on held-out
+//! stations, so that one change cannot hide another at a different time (ranked by the offsets,
+//! the main source's own episodes took every place). Each is refined at its epoch by that gain,
+//! predicting every station from the others (`lasting_gain`), the score it is judged by:
+//! refined by the offsets instead, a field drawn onto the nearest station (the grid's 1 km
+//! bound) or deep under it fitted the scan as well. All of it on the held view, where a source
+//! near the main one keeps its field, with the second source's rules: rejected on the grid's
+//! bound, or when its field is mostly a move of the main source (trial seeds 101–105, against
+//! refined by the offsets and scored on the free view: 36 → 45 of 60 lasting deflations found).
+//! The network translations are a nuisance in the gain and are removed before the surrogates
+//! randomise each station's series, as for the second source. The scan's value at the fit is
+//! the family's detection statistic: standing out of the surrogates', it makes a score merely
+//! above chance significant, as a step's does; unlike a step's, it never rejects a score beyond
+//! its margin.
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
-    translations, with_translations,
+    translations, unresolvable, with_translations,
 };
 use crate::analysis::score::weighted_gain;
 use crate::analysis::{Family, Rejection};
@@ -71,7 +74,7 @@ pub struct LastingFit {
     pub pos: [f64; 3],
     /// Row of the analysed block where the change begins.
     pub onset: usize,
-    /// Share of the residual variance explained (held-out stations).
+    /// Share of the held view's residual variance explained (held-out stations).
     pub score: f64,
     /// The scan statistic at the fit (`shared_offset` at its position and onset): the
     /// family's detection statistic, which supports its score and does not veto it.
@@ -225,7 +228,8 @@ fn candidates(
 /// unrefined points' [`lasting_gain`]): the best few distinct grid points, each at its best
 /// epoch, and the best grid point of each of the few epochs where it gains most (a change
 /// elsewhere in time — the main source's own episodes — must not hide one weaker at its onset);
-/// each refined at its epoch, the one with the largest [`lasting_gain`] kept.
+/// each refined at its epoch by its [`lasting_gain`], the one with the largest kept. The gain,
+/// like the offsets, on the held view.
 fn search(res: &GnssResiduals) -> LastingFit {
     let ns = res.ns();
     let loc = res.locating();
@@ -243,14 +247,16 @@ fn search(res: &GnssResiduals) -> LastingFit {
         .par_iter()
         .map(|g| d.iter().map(|(_, de)| shared_offset(g, de, ns)).collect())
         .collect();
-    let ts = translations(res);
-    let pre = Prefix::new(&res.fit.r, res.nc());
-    let gain = |pos: [f64; 3], onset: usize| lasting_gain(&pattern(res, pos), &ts, &pre, ns, onset);
+    let ts = translations(loc);
+    let pre = Prefix::new(&loc.fit.r, loc.nc());
+    let gain = |pos: [f64; 3], onset: usize| lasting_gain(&pattern(loc, pos), &ts, &pre, ns, onset);
     let mut best: Option<LastingFit> = None;
-    for (v, pi, k) in candidates(&table, pts, |pi, k| gain(pts[pi], d[k].0)) {
+    for (_, pi, k) in candidates(&table, pts, |pi, k| gain(pts[pi], d[k].0)) {
         let (onset, de) = &d[k];
-        let (pos, stat) = refine(loc, pts, pts[pi], v, &|g| shared_offset(g, de, ns));
-        let score = gain(pos, *onset);
+        let (pos, score) = refine(loc, pts, pts[pi], gain(pts[pi], *onset), &|g| {
+            lasting_gain(g, &ts, &pre, ns, *onset)
+        });
+        let stat = shared_offset(&pattern(loc, pos), de, ns);
         // (The first candidate stands even without a gain: its position is still reported.)
         if best.is_none_or(|b| score > b.score) {
             best = Some(LastingFit {
@@ -262,7 +268,7 @@ fn search(res: &GnssResiduals) -> LastingFit {
         }
     }
     let mut best = best.unwrap_or_default();
-    best.score /= res.ctx.total_fit.max(1e-300);
+    best.score /= loc.ctx.total_fit.max(1e-300);
     best
 }
 
@@ -343,7 +349,8 @@ impl Family<GnssResiduals> for LastingSource {
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
-        on_bound(&lasting_grid(res.locating()).points, fit.pos)
+        let loc = res.locating();
+        on_bound(&lasting_grid(loc).points, fit.pos).or_else(|| unresolvable(loc, fit.pos))
     }
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)

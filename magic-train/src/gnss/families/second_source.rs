@@ -323,7 +323,7 @@ pub fn resolvable(res: &GnssResiduals, pos: [f64; 3]) -> f64 {
 
 /// Why a second source at `pos` is not a discovery: its field mostly a move of the main source
 /// ([`resolvable`] below [`MIN_RESOLVABLE`]).
-fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
+pub(super) fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
     let share = resolvable(res, pos);
     (share < MIN_RESOLVABLE).then_some(Rejection::Unresolvable {
         share,
