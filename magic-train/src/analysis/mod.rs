@@ -32,8 +32,8 @@ pub enum MainSource {
     /// Free to move every day, as the encoder moves it: whatever its position, depth or volume
     /// can produce is projected off the residuals. Point sources are located with the main
     /// source held (their field near the main one kept whole, so their depth is fixed) and
-    /// scored there too, where only what no move of the main source can produce may count for
-    /// them (a candidate whose field is mostly such a move is rejected).
+    /// scored there too; a candidate whose field is mostly a move of the main source is
+    /// rejected.
     #[default]
     Free,
     /// Held in place, its volume changing: only its field's direction is projected off, so a
