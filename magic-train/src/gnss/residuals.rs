@@ -691,15 +691,11 @@ mod tests {
         // A lasting source is held to the same rules, on its own (shallower) grid.
         use crate::analysis::Family;
         use crate::gnss::families::lasting_source::{LastingFit, LastingSource};
-        let lasting = |pos: [f64; 3]| {
-            LastingSource.reject(
-                &res,
-                &LastingFit {
-                    pos,
-                    ..LastingFit::default()
-                },
-            )
+        let fit = |pos: [f64; 3]| LastingFit {
+            pos,
+            ..LastingFit::default()
         };
+        let lasting = |pos: [f64; 3]| LastingSource.reject(&res, &fit(pos));
         let beside = lasting([main[0], main[1] + 3.0, main[2]]);
         assert!(
             matches!(beside, Some(Rejection::Unresolvable { .. })),

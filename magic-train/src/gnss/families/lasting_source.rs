@@ -249,13 +249,13 @@ fn search(res: &GnssResiduals) -> LastingFit {
         .collect();
     let ts = translations(loc);
     let pre = Prefix::new(&loc.fit.r, loc.nc());
-    let gain = |pos: [f64; 3], onset: usize| lasting_gain(&pattern(loc, pos), &ts, &pre, ns, onset);
+    let gain_of = |g: &[f64], onset: usize| lasting_gain(g, &ts, &pre, ns, onset);
+    let gain = |pos: [f64; 3], onset: usize| gain_of(&pattern(loc, pos), onset);
     let mut best: Option<LastingFit> = None;
     for (_, pi, k) in candidates(&table, pts, |pi, k| gain(pts[pi], d[k].0)) {
         let (onset, de) = &d[k];
-        let (pos, score) = refine(loc, pts, pts[pi], gain(pts[pi], *onset), &|g| {
-            lasting_gain(g, &ts, &pre, ns, *onset)
-        });
+        let start = gain(pts[pi], *onset);
+        let (pos, score) = refine(loc, pts, pts[pi], start, &|g| gain_of(g, *onset));
         let stat = shared_offset(&pattern(loc, pos), de, ns);
         // (The first candidate stands even without a gain: its position is still reported.)
         if best.is_none_or(|b| score > b.score) {
