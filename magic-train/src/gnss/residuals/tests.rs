@@ -1,0 +1,211 @@
+//! Tests of the residuals' views: the held direction, the projections and the rules that
+//! tell a second source from a move of the main one.
+
+use super::*;
+use crate::gnss::synth::draw;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+/// A source at a fixed position whose volume changes, a network translation that overlaps its
+/// Jacobian's span, and noise: the held direction is the source's field, the translation's
+/// part in the span notwithstanding.
+#[test]
+fn the_held_source_is_the_field_of_a_source_that_stays_put() {
+    let (ns, nc) = (6, 18);
+    let mut rng = StdRng::seed_from_u64(7);
+    let mut normal = move || draw::normal(&mut rng);
+    let scale = vec![1.0; nc];
+    let up = translation(&scale, ns, 2);
+    // The span: a direction close to the vertical translation (a deep source's uplift) and
+    // three random ones.
+    let near_up: Vec<f64> = up.iter().map(|u| u + 0.3 * normal()).collect();
+    let mut cols: Vec<(Vec<f64>, f64)> = vec![(near_up, 1.0)];
+    for _ in 0..3 {
+        cols.push(((0..nc).map(|_| normal()).collect(), 1.0));
+    }
+    let source = orthonormal(&cols, 1e-9, 2);
+    let weights = [0.3, 1.0, -0.6, 0.4];
+    let field: Vec<f64> = (0..nc)
+        .map(|c| source.iter().zip(weights).map(|(q, w)| q[c] * w).sum())
+        .collect();
+    let norm = dot(&field, &field).sqrt();
+    let rows: Vec<Vec<f64>> = (0..2000)
+        .map(|t| {
+            let a = (t as f64 / 150.0).sin() * 3.0;
+            let drift = 4.0 * normal();
+            (0..nc)
+                .map(|c| a * field[c] + drift * up[c] + 0.05 * normal())
+                .collect()
+        })
+        .collect();
+    let translations = translation_basis(&scale, ns);
+    let w = held_source(&source, &translations, &rows).unwrap();
+    let cos = dot(&w, &field).abs() / norm;
+    assert!(cos > 0.9999, "cosine with the source's field {cos}");
+    // Without the translations as nuisances the common mode, larger than the source here,
+    // would be taken for it.
+    let naive = held_source(&source, &[], &rows).unwrap();
+    assert!(dot(&naive, &field).abs() / norm < 0.9, "naive direction");
+    // A span that holds the translation itself cannot tell the two apart: not held.
+    let mut with_up = vec![up.clone()];
+    with_up.extend(source[1..].iter().cloned());
+    let with_up: Vec<(Vec<f64>, f64)> = with_up.into_iter().map(|q| (q, 1.0)).collect();
+    let with_up = orthonormal(&with_up, 1e-9, 2);
+    assert!(held_source(&with_up, &translations, &rows).is_none());
+}
+
+/// A source's resolvable share (`second_source::resolvable`): none at the main source itself
+/// (its field is the volume's direction), little beside it at its depth, most far from it —
+/// and, channels weighted as the synthetic generator weighs them, the generator's own measure.
+#[test]
+fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
+    use crate::gnss::families::second_source::{rejection, resolvable};
+    use magic_core::mogi::{field_jacobian, N_PARAMS};
+    let network = Network::akutan();
+    let (ns, nc) = (network.len(), 3 * network.len());
+    let main = crate::gnss::synth::SOURCE;
+    let scale: Vec<f64> = (0..nc).map(|c| [1.2, 1.2, 3.5][c / ns]).collect();
+    let (mut out, mut jac) = (vec![0.0; nc], vec![[0.0; N_PARAMS]; nc]);
+    field_jacobian(
+        &network.stations,
+        &[main[0], main[1], main[2], 1.0],
+        &mut out,
+        &mut jac,
+    )
+    .unwrap();
+    let columns: Vec<(Vec<f64>, f64)> = (0..N_PARAMS)
+        .map(|j| scaled((0..nc).map(|c| jac[c][j] / scale[c]).collect()))
+        .collect();
+    let rows = vec![vec![0.0; nc]; 10];
+    let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+    let shared = Shared {
+        network: &network,
+        scale: &scale,
+        mse: 0.0,
+        main: [main[0], main[1], main[2]],
+        source_span: orthonormal(&columns, 1e-9, 2),
+        splits: &[SplitName::Train],
+        days: &days,
+    };
+    let res = view(&shared, &rows, Vec::new());
+    let at = |p: [f64; 3]| resolvable(&res, p);
+    assert!(at([main[0], main[1], main[2]]) < 1e-6);
+    assert!(at([main[0], main[1] + 3.0, main[2]]) < 0.25);
+    assert!(at([main[0] + 10.0, main[1] - 4.0, 5.0]) > 0.5);
+    // The search prefers a candidate no rule rejects: the move, and the grid's deepest
+    // bound, are rejected; the far source is not.
+    use crate::analysis::{Rejection, Side};
+    let beside = rejection(&res, [main[0], main[1] + 3.0, main[2]]);
+    assert!(
+        matches!(beside, Some(Rejection::Unresolvable { .. })),
+        "{beside:?}"
+    );
+    let deepest = rejection(&res, [main[0] + 10.0, main[1] - 4.0, 20.0]);
+    assert_eq!(deepest.and_then(|r| r.bound()), Some(("depth", Side::High)));
+    assert_eq!(rejection(&res, [main[0] + 10.0, main[1] - 4.0, 5.0]), None);
+    // A lasting source is held to the same rules, on its own (shallower) grid.
+    use crate::analysis::Family;
+    use crate::gnss::families::lasting_source::{LastingFit, LastingSource};
+    let fit = |pos: [f64; 3]| LastingFit {
+        pos,
+        ..LastingFit::default()
+    };
+    let lasting = |pos: [f64; 3]| LastingSource.reject(&res, &fit(pos));
+    let beside = lasting([main[0], main[1] + 3.0, main[2]]);
+    assert!(
+        matches!(beside, Some(Rejection::Unresolvable { .. })),
+        "{beside:?}"
+    );
+    let shallowest = lasting([main[0] + 10.0, main[1] - 4.0, 1.0]);
+    assert_eq!(
+        shallowest.and_then(|r| r.bound()),
+        Some(("depth", Side::Low))
+    );
+    assert_eq!(lasting([main[0] + 10.0, main[1] - 4.0, 5.0]), None);
+    for p in [
+        [2.5, 2.0, 3.5],
+        [-1.5, 2.0, 3.0],
+        [8.0, -3.0, 6.0],
+        [0.3, 3.2, 7.0],
+    ] {
+        let generator = crate::gnss::synth::resolvable(&network.stations, p);
+        assert!(
+            (at(p) - generator).abs() < 1e-6,
+            "{p:?}: {} vs {generator}",
+            at(p)
+        );
+    }
+}
+
+/// The free residuals are the held ones projected off the rest of the main source's span
+/// (the held direction lies within it); a draw of the free residuals given back the held
+/// view's part beyond them ([`GnssResiduals::beside_moves`]) keeps that part as the data
+/// hold it and is, projected, the draw again; a draw of the held view projected back
+/// ([`GnssResiduals::with_held`]) is seen as the data are.
+#[test]
+fn the_free_view_is_the_held_view_projected() {
+    let network = Network::akutan();
+    let (ns, nc) = (network.len(), 3 * network.len());
+    let mut rng = StdRng::seed_from_u64(11);
+    let mut normal = move || draw::normal(&mut rng);
+    let columns: Vec<(Vec<f64>, f64)> = (0..5)
+        .map(|_| ((0..nc).map(|_| normal()).collect(), 1.0))
+        .collect();
+    let rows: Vec<Vec<f64>> = (0..400)
+        .map(|t| {
+            let a = (t as f64 / 40.0).sin();
+            (0..nc)
+                .map(|c| a * columns[0].0[c] + 0.3 * a * columns[2].0[c] + normal())
+                .collect()
+        })
+        .collect();
+    let scale = vec![1.0; nc];
+    let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+    let shared = Shared {
+        network: &network,
+        scale: &scale,
+        mse: 0.0,
+        main: [0.0; 3],
+        source_span: Vec::new(),
+        splits: &[SplitName::Train],
+        days: &days,
+    };
+    let source = orthonormal(&columns[..SOURCE_VARIABLES], 1e-9, 1);
+    let held = held_tangent(&source, &columns[SOURCE_VARIABLES..], &scale, ns, &rows)
+        .expect("held in place");
+    let held = view(&shared, &rows, held);
+    let mut free = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
+    let largest = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+    };
+    let gap = largest(&free.project_rows(&held.fit.r), &free.fit.r);
+    assert!(gap < 1e-12, "free vs held projected: {gap}");
+    assert!(std::ptr::eq(free.locating(), &free));
+    let noise: Vec<f64> = (0..free.fit.r.len()).map(|_| normal()).collect();
+    let drawn = free.with_fit(free.project_rows(&noise));
+    let same = free.beside_moves(drawn.clone(), &held.fit.r);
+    assert!(same.held.is_none(), "no held view, nothing given back");
+    free.held = Some(Arc::new(held.clone()));
+    assert!(std::ptr::eq(free.locating(), free.held.as_deref().unwrap()));
+    let again = free.with_held(held.clone());
+    let gap = largest(&again.fit.r, &free.fit.r);
+    assert!(gap < 1e-12, "the held view projected back: {gap}");
+    assert_eq!(
+        again.held.as_deref().expect("a held view").fit.r,
+        held.fit.r
+    );
+    let out = free.beside_moves(drawn.clone(), &held.fit.r);
+    assert_eq!(out.fit.r, drawn.fit.r);
+    let out_held = out.held.as_deref().expect("a held view");
+    let gap = largest(&free.project_rows(&out_held.fit.r), &drawn.fit.r);
+    assert!(gap < 1e-12, "the draw's held view projected: {gap}");
+    let minus = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<_>>();
+    let gap = largest(
+        &minus(&out_held.fit.r, &out.fit.r),
+        &minus(&held.fit.r, &free.fit.r),
+    );
+    assert!(gap < 1e-12, "the part beyond the free view: {gap}");
+    assert!(free.with_fit(free.fit.r.clone()).held.is_none());
+}
