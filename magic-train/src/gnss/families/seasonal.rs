@@ -1,6 +1,8 @@
 //! `seasonal`: per-station annual and semiannual terms (loading, monument thermal expansion,
 //! multipath). Fitted: declared, its constants (4 per channel, mm) enter F as a function of the
-//! date.
+//! date. Scored (and its surrogates drawn) on the projected residuals, what F cannot produce;
+//! its amplitudes reported and declared from the rows with the projection's part given back
+//! ([`GnssResiduals::given_back`]), F's daily variables taken not to follow the calendar.
 
 use super::dated::{self, Scored, TimeFit};
 use super::latent::round3;
@@ -58,6 +60,13 @@ fn fit_block(b: &Block, nc: usize) -> SeasonalFit {
     }
 }
 
+/// The coefficients reported and declared: fitted to the rows with the projection's part given
+/// back where they are the data's own ([`GnssResiduals::given_back`]), else the fit's.
+fn coefficients(res: &GnssResiduals, fit: &Scored<SeasonalFit>) -> Vec<Vec<f64>> {
+    res.given_back()
+        .map_or_else(|| fit.fit.coef.clone(), |b| fit_block(&b, res.nc()).coef)
+}
+
 impl Family<GnssResiduals> for Seasonal {
     type Fit = Scored<SeasonalFit>;
 
@@ -79,10 +88,11 @@ impl Family<GnssResiduals> for Seasonal {
     ) -> Result<GnssResiduals> {
         Ok(dated::surrogate(res, &fit.fit, rng))
     }
-    /// Annual and semiannual amplitudes per station and component (mm).
+    /// Annual and semiannual amplitudes per station and component (mm), of the term in the
+    /// rows given back ([`GnssResiduals::given_back`]).
     fn params(&self, res: &GnssResiduals, fit: &Self::Fit) -> serde_json::Value {
         let ns = res.ns();
-        let coef = &fit.fit.coef;
+        let coef = &coefficients(res, fit);
         let amp = |c: usize, j: usize| coef[c][j].hypot(coef[c][j + 1]) * res.ctx.scale[c];
         let per_station = |j: usize| {
             let mut m = serde_json::Map::new();
@@ -95,7 +105,7 @@ impl Family<GnssResiduals> for Seasonal {
         json!({"annual_mm": per_station(1), "semiannual_mm": per_station(3)})
     }
     fn declare(&self, res: &GnssResiduals, fit: &Self::Fit) -> Option<OwnedEffect> {
-        let coef = &fit.fit.coef;
+        let coef = &coefficients(res, fit);
         Some(OwnedEffect::Seasonal {
             coef: (0..res.nc())
                 .flat_map(|c| (1..5).map(move |j| (coef[c][j] * res.ctx.scale[c]) as f32))

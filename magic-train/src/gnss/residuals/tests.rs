@@ -209,3 +209,76 @@ fn the_free_view_is_the_held_view_projected() {
     assert!(gap < 1e-12, "the part beyond the free view: {gap}");
     assert!(free.with_fit(free.fit.r.clone()).held.is_none());
 }
+
+/// An annual term along the main source's field, off the network's translations: the
+/// projection takes it off every day, the rows given back hold it whole (a least-squares sine
+/// per channel recovers it). Of an annual network translation, part of it in the span, the
+/// rows given back hold no more along the translation than the projected rows: what the
+/// projection took of it stays taken. A draw has nothing to give back.
+#[test]
+fn the_rows_given_back_hold_a_term_in_the_span() {
+    let network = Network::akutan();
+    let (ns, nc) = (network.len(), 3 * network.len());
+    let mut rng = StdRng::seed_from_u64(5);
+    let mut normal = move || draw::normal(&mut rng);
+    let scale = vec![1.0; nc];
+    let up = translation(&scale, ns, 2);
+    // Span columns without a translation's part, but for the last, which holds the upward one.
+    let mut columns: Vec<(Vec<f64>, f64)> = (0..SOURCE_VARIABLES)
+        .map(|_| {
+            let col: Vec<f64> = (0..nc).map(|_| normal()).collect();
+            (project(&translation_basis(&scale, ns), &col), 1.0)
+        })
+        .collect();
+    for (v, u) in columns[SOURCE_VARIABLES - 1].0.iter_mut().zip(&up) {
+        *v += u;
+    }
+    let w = std::f64::consts::TAU / 365.25;
+    let days: Vec<f64> = (0..3000).map(|t| t as f64).collect();
+    let rows: Vec<Vec<f64>> = days
+        .iter()
+        .map(|d| {
+            let (s, c) = ((w * d).sin(), (w * d).cos());
+            (0..nc)
+                .map(|k| 2.0 * s * columns[0].0[k] + 1.5 * c * up[k] + 0.5 * normal())
+                .collect()
+        })
+        .collect();
+    let shared = Shared {
+        network: &network,
+        scale: &scale,
+        mse: 0.0,
+        main: [0.0; 3],
+        source_span: Vec::new(),
+        splits: &[SplitName::Train],
+        days: &days,
+    };
+    let res = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
+    let basis = |d: f64, b: &mut [f64]| {
+        b[0] = 1.0;
+        b[1] = (w * d).sin();
+        b[2] = (w * d).cos();
+    };
+    let fitted = |r: &[f64]| crate::gnss::families::dated::fit_basis(r, &days, nc, 3, &basis);
+    let back = res.given_back().expect("the data's own residuals");
+    assert_eq!(back.days, res.fit.days);
+    let (got, lost) = (fitted(&back.r), fitted(&res.fit.r));
+    for c in 0..nc {
+        let want = 2.0 * columns[0].0[c];
+        assert!(
+            (got[c][1] - want).abs() < 0.05,
+            "channel {c}: {got:?} vs {want}"
+        );
+        assert!(
+            lost[c][1].abs() < 0.05,
+            "channel {c}: {lost:?} left after projection"
+        );
+    }
+    // The translation's cosine: as much of it along the upward translation in both (what of it
+    // the projection took stays taken), less than it had.
+    let along_up = |f: &[Vec<f64>]| (2 * ns..nc).map(|c| f[c][2]).sum::<f64>() / ns as f64;
+    let (kept, projected) = (along_up(&got), along_up(&lost));
+    assert!((kept - projected).abs() < 1e-9, "{kept} vs {projected}");
+    assert!(kept < 1.4, "the translation given back: {kept}");
+    assert!(res.with_fit(res.fit.r.clone()).given_back().is_none());
+}
