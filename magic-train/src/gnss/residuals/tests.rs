@@ -6,6 +6,19 @@ use crate::gnss::synth::draw;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
+/// What the views share, for a test: the main source at the origin, no span of its own.
+fn plain<'a>(network: &'a Network, scale: &'a [f64], days: &'a [f64]) -> Shared<'a> {
+    Shared {
+        network,
+        scale,
+        mse: 0.0,
+        main: [0.0; 3],
+        source_span: Vec::new(),
+        splits: &[SplitName::Train],
+        days,
+    }
+}
+
 /// A source at a fixed position whose volume changes, a network translation that overlaps its
 /// Jacobian's span, and noise: the held direction is the source's field, the translation's
 /// part in the span notwithstanding.
@@ -79,13 +92,9 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
     let rows = vec![vec![0.0; nc]; 10];
     let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
     let shared = Shared {
-        network: &network,
-        scale: &scale,
-        mse: 0.0,
         main: [main[0], main[1], main[2]],
         source_span: orthonormal(&columns, 1e-9, 2),
-        splits: &[SplitName::Train],
-        days: &days,
+        ..plain(&network, &scale, &days)
     };
     let res = view(&shared, &rows, Vec::new());
     let at = |p: [f64; 3]| resolvable(&res, p);
@@ -161,15 +170,7 @@ fn the_free_view_is_the_held_view_projected() {
         .collect();
     let scale = vec![1.0; nc];
     let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
-    let shared = Shared {
-        network: &network,
-        scale: &scale,
-        mse: 0.0,
-        main: [0.0; 3],
-        source_span: Vec::new(),
-        splits: &[SplitName::Train],
-        days: &days,
-    };
+    let shared = plain(&network, &scale, &days);
     let source = orthonormal(&columns[..SOURCE_VARIABLES], 1e-9, 1);
     let held = held_tangent(&source, &columns[SOURCE_VARIABLES..], &scale, ns, &rows)
         .expect("held in place");
@@ -244,15 +245,7 @@ fn the_rows_given_back_hold_a_term_in_the_span() {
                 .collect()
         })
         .collect();
-    let shared = Shared {
-        network: &network,
-        scale: &scale,
-        mse: 0.0,
-        main: [0.0; 3],
-        source_span: Vec::new(),
-        splits: &[SplitName::Train],
-        days: &days,
-    };
+    let shared = plain(&network, &scale, &days);
     let res = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
     let basis = |d: f64, b: &mut [f64]| {
         b[0] = 1.0;
