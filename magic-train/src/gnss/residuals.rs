@@ -189,10 +189,7 @@ impl GnssResiduals {
             .r
             .chunks(self.nc())
             .zip(taken.chunks(self.nc()))
-            .flat_map(|(r, t)| {
-                let t = project(&translations, t);
-                r.iter().zip(t).map(|(a, b)| a + b).collect::<Vec<_>>()
-            })
+            .flat_map(|(r, t)| r.iter().zip(project(&translations, t)).map(|(a, b)| a + b))
             .collect();
         Some(Block {
             days: self.fit.days.clone(),

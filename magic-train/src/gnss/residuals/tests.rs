@@ -225,10 +225,11 @@ fn the_rows_given_back_hold_a_term_in_the_span() {
     let scale = vec![1.0; nc];
     let up = translation(&scale, ns, 2);
     // Span columns without a translation's part, but for the last, which holds the upward one.
+    let translations = translation_basis(&scale, ns);
     let mut columns: Vec<(Vec<f64>, f64)> = (0..SOURCE_VARIABLES)
         .map(|_| {
             let col: Vec<f64> = (0..nc).map(|_| normal()).collect();
-            (project(&translation_basis(&scale, ns), &col), 1.0)
+            (project(&translations, &col), 1.0)
         })
         .collect();
     for (v, u) in columns[SOURCE_VARIABLES - 1].0.iter_mut().zip(&up) {
