@@ -247,8 +247,14 @@ pub fn compare(family: &str, tp: &serde_json::Value, p: &serde_json::Value) -> (
     }
 }
 
+/// How `e` was recovered among `ranked` (best first): judged by the first significant candidate
+/// declaring its term ([`same_effect`]: a second source found as a change that stays is the
+/// source the loop adds), or else by its own family's candidate.
 fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
-    let pos = ranked.iter().position(|c| c.family == e.family);
+    let pos = ranked
+        .iter()
+        .position(|c| c.significant && same_effect(&c.family, &e.family))
+        .or_else(|| ranked.iter().position(|c| c.family == e.family));
     let Some(c) = pos.map(|i| ranked[i]) else {
         return Found {
             family: e.family.clone(),
@@ -265,7 +271,11 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
         significant: c.significant,
         rank: pos.map(|i| i + 1),
         params_ok,
-        detail,
+        detail: if c.family == e.family {
+            detail
+        } else {
+            format!("as {}: {detail}", c.family)
+        },
         rejected: c.rejected.clone(),
     }
 }

@@ -187,3 +187,33 @@ fn a_source_found_as_the_other_time_course_is_not_a_false_addition() {
     assert_eq!(r.false_additions, ["drift"]);
     assert!(same_effect("lasting_source", "second_source") && !same_effect("step", "drift"));
 }
+
+#[test]
+fn a_source_found_as_the_other_time_course_is_found() {
+    let src = json!({"x_km": 4.0, "y_km": -2.0, "depth_km": 5.0});
+    let truth = json!({"scenario": "second_source", "noise": "paper", "placement": "test",
+        "effects": [{"family": "second_source", "params": src}], "background": []});
+    let off = json!({"x_km": 9.0, "y_km": -2.0, "depth_km": 5.0});
+    // The loop adds the significant lasting source at the right place: found, first.
+    let r = recovery(
+        &truth,
+        &[
+            cand("lasting_source", true, src.clone()),
+            cand("second_source", true, off.clone()),
+        ],
+    );
+    assert!(r.ok(), "{r:?}");
+    assert!(
+        r.effects[0].detail.starts_with("as lasting_source"),
+        "{r:?}"
+    );
+    // Added at the wrong place, it is not rescued by the pulse's own candidate below it.
+    let r = recovery(
+        &truth,
+        &[
+            cand("lasting_source", true, off),
+            cand("second_source", true, src),
+        ],
+    );
+    assert!(!r.ok() && !r.effects[0].params_ok, "{r:?}");
+}
