@@ -6,7 +6,9 @@
 //! floored at zero) by more than its margin: the score must pass the surrogates' mean plus
 //! [`SD_MARGIN`] standard deviations on the square-root scale (where noise scores are close to
 //! Gaussian; the raw scores are χ²-like with a heavy tail), and exceed the chance level by at
-//! least [`MIN_EXCESS`] of the residual variance (negligible effects are not worth a model term).
+//! least [`MIN_EXCESS`] of the residual variance (negligible effects are not worth a model term;
+//! a family whose score is a transient's gain sets its floor in days' worth of residual variance
+//! instead: [`Family::min_excess`](super::Family::min_excess)).
 //! A family with a detection statistic (the step scan's peak) is also significant when the
 //! statistic [`stands_out`] of its surrogates' by a like rule and the score exceeds chance: a
 //! clear local effect is worth its term though it explains little of the whole network.
@@ -111,25 +113,35 @@ impl Candidate {
     ) -> Candidate {
         let chance_level = quantile(&chance, quantile_level).max(0.0);
         let chance_sd = sd(&chance);
-        let t = root_threshold(&chance, SD_MARGIN);
-        let margin = MIN_EXCESS.max(t * t - chance_level);
         Candidate {
             family: family.into(),
             variance_explained: score,
             chance_level,
-            significant: score - chance_level > margin,
+            significant: false,
             params,
             effect,
             chance_sd,
-            margin,
+            margin: 0.0,
             surrogate_scores: chance,
             statistic: None,
             rejected: None,
             uncertainty: vec![],
         }
+        .with_floor(MIN_EXCESS)
     }
 
-    /// Score minus chance level (the ranking key).
+    /// The candidate judged with `floor` as the least excess over chance that counts (the
+    /// module documentation's rule with `floor` for [`MIN_EXCESS`]; a family whose score is a
+    /// transient's gain sets its own: [`Family::min_excess`](super::Family::min_excess)).
+    pub fn with_floor(mut self, floor: f64) -> Candidate {
+        let t = root_threshold(&self.surrogate_scores, SD_MARGIN);
+        self.margin = floor.max(t * t - self.chance_level);
+        self.significant = self.excess() > self.margin;
+        self
+    }
+
+    /// Score minus chance level (the ranking key within the significant and the other
+    /// candidates: see [`rank`]).
     pub fn excess(&self) -> f64 {
         self.variance_explained - self.chance_level
     }
@@ -164,6 +176,18 @@ impl Candidate {
     }
 }
 
+/// Ranks `effects`, best first: the significant candidates (what the loop may add) before the
+/// others, each group by excess over chance. A candidate a rule rejected (on the bound of its
+/// grid, say) or whose excess is within its margin is no discovery, however large its excess:
+/// ranked by excess alone, it would stand above the discovery the loop adds.
+pub fn rank(effects: &mut [Candidate]) {
+    effects.sort_by(|a, b| {
+        b.significant
+            .cmp(&a.significant)
+            .then(b.excess().total_cmp(&a.excess()))
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -177,5 +201,19 @@ mod tests {
         assert!(strong.significant);
         assert!(strong.margin >= MIN_EXCESS);
         assert!((strong.excess() - (0.2 - strong.chance_level)).abs() < 1e-15);
+    }
+
+    #[test]
+    fn significant_candidates_rank_above_larger_excesses_that_are_not() {
+        let noise = vec![0.010, 0.012, 0.008, 0.011, 0.009, 0.010, 0.013, 0.007];
+        let c = |f: &str, score: f64| {
+            Candidate::from_scores(f, score, noise.clone(), 0.95, json!({}), None)
+        };
+        let mut rejected = c("a", 0.5);
+        rejected.significant = false;
+        let mut effects = vec![c("weak", 0.014), rejected, c("b", 0.2), c("c", 0.3)];
+        rank(&mut effects);
+        let order: Vec<&str> = effects.iter().map(|c| c.family.as_str()).collect();
+        assert_eq!(order, ["c", "b", "a", "weak"]);
     }
 }

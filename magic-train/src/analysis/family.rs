@@ -9,7 +9,7 @@
 //!
 //! [`Effect`]: magic_core::effects::Effect
 
-use super::{stands_out, AnalysisOptions, Candidate, ParamSd, Rejection};
+use super::{stands_out, AnalysisOptions, Candidate, ParamSd, Rejection, MIN_EXCESS};
 use crate::model::OwnedEffect;
 use anyhow::Result;
 use rand::rngs::StdRng;
@@ -30,6 +30,13 @@ pub trait Family<R>: Sync {
     /// Residuals like `res` without this family's signal: `fit` removed, then randomised so that
     /// the noise's structure is kept and the family's is not.
     fn surrogate(&self, res: &R, fit: &Self::Fit, rng: &mut StdRng) -> Result<R>;
+    /// The least excess over chance (share of the residual variance) a fit must reach to count
+    /// ([`MIN_EXCESS`] by default). A family scored on the interval where a transient happens
+    /// sets it in days' worth of residual variance, so that a transient's floor does not grow
+    /// with the record's length.
+    fn min_excess(&self, _res: &R) -> f64 {
+        MIN_EXCESS
+    }
     /// The fit's parameters as reported (JSON).
     fn params(&self, res: &R, fit: &Self::Fit) -> serde_json::Value;
     /// The effect that adds the fit to F (`None`: not declarable, or already declared).
@@ -115,7 +122,8 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
             opts.quantile,
             self.params(res, &fit),
             self.declare(res, &fit),
-        );
+        )
+        .with_floor(self.min_excess(res));
         if let Some(why) = self.reject(res, &fit) {
             c.significant = false;
             c.rejected = Some(why);

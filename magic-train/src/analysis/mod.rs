@@ -4,8 +4,8 @@
 //! observation) are computed by the [`Problem`]; each of its effect [`Family`]s is fitted to them,
 //! scored by the share of residual variance it explains on held-out data, and compared with the
 //! same score on surrogates that keep the noise's structure but not the family's
-//! ([`DynFamily::assess`]); the candidates are ranked by their excess over chance
-//! ([`Candidate`]). The loop ([`crate::closed_loop`]) adds the top significant, declarable one to F.
+//! ([`DynFamily::assess`]); the candidates are ranked, the significant ones first, by their
+//! excess over chance ([`Candidate`], [`rank`]). The loop ([`crate::closed_loop`]) adds the top significant, declarable one to F.
 
 mod candidate;
 mod family;
@@ -14,7 +14,7 @@ mod rejection;
 pub mod score;
 pub mod surrogate;
 
-pub use candidate::{stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
+pub use candidate::{rank, stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
 pub use family::{surrogate_seeds, DynFamily, Family};
 pub use rejection::{Rejection, Side};
 
@@ -99,7 +99,8 @@ pub struct Analysis {
     pub problem: &'static str,
     /// Analysed splits.
     pub splits: Vec<SplitName>,
-    /// Candidates ranked by excess over chance, descending.
+    /// Candidates ranked ([`rank`]): the significant ones first, each group by excess over
+    /// chance, descending.
     pub effects: Vec<Candidate>,
     /// What the problem reports about the residuals themselves.
     pub residuals: serde_json::Value,
@@ -175,8 +176,9 @@ fn compact(v: &serde_json::Value) -> String {
     }
 }
 
-/// Fits every family of `problem` to the residuals of `model` and ranks them by their excess
-/// over chance; returns the residuals too (for the problem's figures).
+/// Fits every family of `problem` to the residuals of `model` and ranks them ([`rank`]: the
+/// significant ones first, by excess over chance), again after the problem has reconciled them;
+/// returns the residuals too (for the problem's figures).
 pub fn analyse<P: Problem + ?Sized>(
     problem: &P,
     model: &Model<'_>,
@@ -192,8 +194,9 @@ pub fn analyse<P: Problem + ?Sized>(
         .iter()
         .map(|f| f.assess(&res, opts))
         .collect::<Result<Vec<_>>>()?;
-    effects.sort_by(|a, b| b.excess().total_cmp(&a.excess()));
+    rank(&mut effects);
     problem.reconcile(&res, &mut effects);
+    rank(&mut effects);
     let (residuals, summary) = problem.describe_residuals(&res);
     Ok((
         Analysis {
