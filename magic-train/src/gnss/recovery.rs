@@ -247,13 +247,16 @@ pub fn compare(family: &str, tp: &serde_json::Value, p: &serde_json::Value) -> (
     }
 }
 
-/// How `e` was recovered among `ranked` (best first): judged by the first significant candidate
-/// declaring its term ([`same_effect`]: a second source found as a change that stays is the
-/// source the loop adds), or else by its own family's candidate.
+/// How `e` was recovered among `ranked` (best first). A significant candidate declaring its term
+/// ([`same_effect`]: a second source found as a change that stays is the source the loop adds)
+/// finds it with its parameters right: the first such one, else the first significant one
+/// declaring its term, else its own family's candidate is judged.
 fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
+    let declares = |c: &&Candidate| c.significant && same_effect(&c.family, &e.family);
     let pos = ranked
         .iter()
-        .position(|c| c.significant && same_effect(&c.family, &e.family))
+        .position(|c| declares(c) && compare(&e.family, &e.params, &c.params).0)
+        .or_else(|| ranked.iter().position(declares))
         .or_else(|| ranked.iter().position(|c| c.family == e.family));
     let Some(c) = pos.map(|i| ranked[i]) else {
         return Found {

@@ -207,13 +207,29 @@ fn a_source_found_as_the_other_time_course_is_found() {
         r.effects[0].detail.starts_with("as lasting_source"),
         "{r:?}"
     );
-    // Added at the wrong place, it is not rescued by the pulse's own candidate below it.
+    // A significant one at the wrong place ranked above the right one: found, not first.
+    let r = recovery(
+        &truth,
+        &[
+            cand("lasting_source", true, off.clone()),
+            cand("second_source", true, src.clone()),
+        ],
+    );
+    assert!(
+        r.all_found() && r.effects[0].rank == Some(2) && !r.ok(),
+        "{r:?}"
+    );
+    // Only at the wrong place: judged there, not found.
     let r = recovery(
         &truth,
         &[
             cand("lasting_source", true, off),
-            cand("second_source", true, src),
+            cand("second_source", false, src),
         ],
     );
-    assert!(!r.ok() && !r.effects[0].params_ok, "{r:?}");
+    assert!(!r.all_found() && !r.effects[0].params_ok, "{r:?}");
+    assert!(
+        r.effects[0].detail.starts_with("as lasting_source"),
+        "{r:?}"
+    );
 }
