@@ -5,7 +5,8 @@
 //! scored by the share of residual variance it explains on held-out data, and compared with the
 //! same score on surrogates that keep the noise's structure but not the family's
 //! ([`DynFamily::assess`]); the candidates are ranked, the significant ones first, by their
-//! excess over chance ([`Candidate`], [`rank`]). The loop ([`crate::closed_loop`]) adds the top significant, declarable one to F.
+//! excess over chance ([`Candidate`], [`rank`]). The loop ([`crate::closed_loop`]) adds the top
+//! significant, declarable one to F.
 
 mod candidate;
 mod family;

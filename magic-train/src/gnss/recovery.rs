@@ -7,7 +7,8 @@
 //! slope, each common-mode RMS and the median of the seasonal annual amplitudes within
 //! [`RELATIVE`]; the drifting stations exactly. What the noise itself holds (the truth's
 //! `background`: the `red` model's common mode and annual term) is neither counted against the
-//! analysis nor in its ranks.
+//! analysis nor in its ranks. A source is found by a significant candidate of either source
+//! family ([`same_effect`]): both add the same term to F.
 
 use super::synth::truth::{background, injected, Injected};
 use super::synth::Spec;
