@@ -7,7 +7,9 @@
 //!
 //! **Located and scored where the main source is held in place.** The position is the one whose
 //! pattern holds most of the residuals' persistent variance, fitted on every station at once
-//! (the ratio of the nearest station's motion to the others' fixes the depth), and its score is
+//! (the ratio of the nearest station's motion to the others' fixes the depth) — over the whole
+//! record and over each two years of it, so that a larger signal of other years does not hide a
+//! pulse ([`LOCATE_INTERVAL_DAYS`]) — and its score is
 //! the leave-one-station-out gain over its best interval of whole [`INTERVAL_BLOCK_DAYS`] blocks
 //! (a transient is not diluted by the years it is absent) — both on the held view
 //! ([`GnssResiduals::locating`]), where only the main source's field direction is projected off.
@@ -256,11 +258,15 @@ pub(super) fn distinct_best(
 
 /// Candidate positions: per neighbour window, the grid points along whose pattern the
 /// residuals' persistent variance is largest ([`latent::persistent_along`], all stations), the
-/// best few (distinct) refined locally; the candidate whose leave-one-station-out gain over its
-/// best interval of days ([`latent::best_interval_gain`]) is largest wins — of those no rule
-/// rejects, if any: a candidate on the grid's bound or mostly a move of the main source is no
-/// discovery, and must not hide one that may be. `res` is the view the source is located and
-/// scored on ([`GnssResiduals::locating`]); `xs` are its windows.
+/// best few (distinct) refined locally; then, with the [`LOCATE_WINDOW`], the best point of each
+/// interval of [`LOCATE_INTERVAL_DAYS`] ([`located_intervals`]), so that a pulse outweighed over
+/// the whole record by a larger signal of other years (a main-source episode the span leaves a
+/// trace of) is still located where it happens. The candidate whose leave-one-station-out gain
+/// over its best interval of days ([`latent::best_interval_gain`]) is largest wins — of those no
+/// rule rejects, if any: a candidate on the grid's bound or mostly a move of the main source is
+/// no discovery, and must not hide one that may be. `res` is the view the source is located and
+/// scored on ([`GnssResiduals::locating`]); `xs` are its windows. The surrogates are searched
+/// the same way, so chance has as many tries as the data.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     let (ns, nc) = (res.ns(), res.nc());
     let r = latent::highpass(&res.fit.r, nc, latent::LATENT_HIGHPASS_DAYS);
@@ -273,15 +279,26 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     // (admissible, fit): a candidate no rule rejects ([`rejection`]) beats one a rule does,
     // whatever their gains.
     let mut best = (false, SourceFit::default());
-    for (w, x) in xs {
+    // Positions the intervals' search has scored (the intervals overlap: each is scored once).
+    let mut tried: Vec<[f64; 3]> = Vec::new();
+    let mut consider = |x: &Cross, w: usize, k: usize, once: bool| {
         let scored = patterns
             .par_iter()
             .enumerate()
             .map(|(pi, g)| (latent::persistent_along(g, x), pi))
             .collect();
-        for (q0, pi) in distinct_best(scored, pts, SOURCE_CANDIDATES) {
+        for (q0, pi) in distinct_best(scored, pts, k) {
             let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
-            let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, *w);
+            if once {
+                if tried
+                    .iter()
+                    .any(|t| (0..3).all(|i| (t[i] - pos[i]).abs() < 0.5))
+                {
+                    continue;
+                }
+                tried.push(pos);
+            }
+            let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
             let ok = rejection(res, pos).is_none();
             if (ok, gain) > (best.0, best.1.score) {
@@ -289,16 +306,45 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
                     ok,
                     SourceFit {
                         pos,
-                        window: *w,
+                        window: w,
                         score: gain,
                     },
                 );
             }
         }
+    };
+    for (w, x) in xs {
+        consider(x, *w, SOURCE_CANDIDATES, false);
+    }
+    for (lo, hi) in located_intervals(r.len() / nc.max(1)) {
+        let x = latent::cross(&r[lo * nc..hi * nc], nc, LOCATE_WINDOW);
+        consider(&x, LOCATE_WINDOW, 1, true);
     }
     let mut best = best.1;
     best.score /= res.ctx.total_fit.max(1e-300);
     best
+}
+
+/// Neighbour window (days) of the intervals' search ([`search`]): a pulse lasts months.
+pub const LOCATE_WINDOW: usize = 30;
+
+/// Days of the intervals a source is also located on ([`search`]), every half of it.
+pub const LOCATE_INTERVAL_DAYS: usize = 730;
+
+/// Row ranges `[lo, hi)` of [`LOCATE_INTERVAL_DAYS`] rows every half of that, over `t_n` rows
+/// (none when the record is not longer than two of them: the whole record is searched anyway).
+fn located_intervals(t_n: usize) -> Vec<(usize, usize)> {
+    let (len, hop) = (LOCATE_INTERVAL_DAYS, LOCATE_INTERVAL_DAYS / 2);
+    if t_n <= 2 * len {
+        return Vec::new();
+    }
+    let mut out: Vec<(usize, usize)> = (0..=(t_n - len) / hop)
+        .map(|i| (i * hop, i * hop + len))
+        .collect();
+    if out.last().is_some_and(|l| l.1 < t_n) {
+        out.push((t_n - len, t_n));
+    }
+    out
 }
 
 /// Why a source at `pos` cannot count as a discovery: on the bound of the search grid `pts`.
@@ -478,5 +524,28 @@ impl Family<GnssResiduals> for SecondSource {
     }
     fn declare(&self, _: &GnssResiduals, fit: &SourceFit) -> Option<OwnedEffect> {
         declare_at(fit.pos, fit.score)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two-year intervals every year cover the record to its last day; a record of up to two of
+    /// them has none (the whole record is searched anyway).
+    #[test]
+    fn the_intervals_cover_the_record_every_half_interval() {
+        assert!(located_intervals(2 * LOCATE_INTERVAL_DAYS).is_empty());
+        let t_n = 6663;
+        let iv = located_intervals(t_n);
+        assert_eq!(iv[0], (0, LOCATE_INTERVAL_DAYS));
+        assert_eq!(*iv.last().unwrap(), (t_n - LOCATE_INTERVAL_DAYS, t_n));
+        for w in iv.windows(2) {
+            assert!(w[1].0 <= w[0].0 + LOCATE_INTERVAL_DAYS / 2);
+            assert!(w[1].0 > w[0].0);
+        }
+        assert!(iv
+            .iter()
+            .all(|&(lo, hi)| hi - lo == LOCATE_INTERVAL_DAYS && hi <= t_n));
     }
 }
