@@ -325,10 +325,10 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     best
 }
 
-/// Neighbour window (days) of the intervals' search ([`search`]): a pulse lasts months.
+/// Neighbour window (days) of the search on intervals of the record: a pulse lasts months.
 pub const LOCATE_WINDOW: usize = 30;
 
-/// Days of the intervals a source is also located on ([`search`]), every half of it.
+/// Days of the intervals a source is also located on, one every half of it.
 pub const LOCATE_INTERVAL_DAYS: usize = 730;
 
 /// Row ranges `[lo, hi)` of [`LOCATE_INTERVAL_DAYS`] rows every half of that, over `t_n` rows
