@@ -328,7 +328,8 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
 /// Neighbour window (days) of the search on intervals of the record: a pulse lasts months.
 pub const LOCATE_WINDOW: usize = 30;
 
-/// Days of the intervals a source is also located on, one every half of it.
+/// Rows (days, in a daily record; a little more where it has gaps) of the intervals a source is
+/// also located on, one every half of it.
 pub const LOCATE_INTERVAL_DAYS: usize = 730;
 
 /// Row ranges `[lo, hi)` of [`LOCATE_INTERVAL_DAYS`] rows every half of that, over `t_n` rows
