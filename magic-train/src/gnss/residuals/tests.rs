@@ -276,3 +276,44 @@ fn the_rows_given_back_hold_a_term_in_the_span() {
     assert!(kept < 1.4, "the translation given back: {kept}");
     assert!(res.with_fit(res.fit.r.clone()).given_back().is_none());
 }
+
+/// A day whose encoder put the main source deep and at its volume bound, with a network
+/// translation in the data: the refit finds the source where the data put it, the translation
+/// fitted beside it.
+#[test]
+fn a_deep_encoder_source_is_refitted_where_the_data_put_it() {
+    let network = Network::akutan();
+    let stations = &network.stations;
+    let nc = 3 * stations.len();
+    let truth = [0.3, 0.2, 7.0, 4.0];
+    let mut obs = vec![0.0; nc];
+    mogi::field(stations, &truth, &mut obs).unwrap();
+    let shift = [1.5, -2.0, 4.0];
+    for (c, o) in obs.iter_mut().enumerate() {
+        *o += shift[c / stations.len()];
+    }
+    let encoder = [-0.5, 1.0, 13.5, 9.9];
+    let mut physics = vec![0.0; nc];
+    mogi::field(stations, &encoder, &mut physics).unwrap();
+    let day = Day {
+        obs,
+        physics,
+        params: encoder.to_vec(),
+    };
+    let common = OwnedEffect::CommonMode;
+    let bytes = common.bytes();
+    let effects = [common.borrow(&bytes)];
+    let mut bounds = magic_core::mogi::PAPER_BOUNDS.to_vec();
+    bounds.extend(effect_bounds(&common));
+    let scale = vec![1.0; nc];
+    let pb = lsq::Problem {
+        stations,
+        effects: &effects,
+        bounds: &bounds,
+        scale: &scale,
+    };
+    let pos = refit(&pb, &day, 14000.0).unwrap();
+    for k in 0..3 {
+        assert!((pos[k] - truth[k]).abs() < 1e-3, "{pos:?} vs {truth:?}");
+    }
+}
