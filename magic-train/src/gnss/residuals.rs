@@ -3,8 +3,8 @@
 //! Every day of the data is inverted with the core's `invert_at` (the model as it will be used)
 //! and the physics-only error F(E(x)) is reported. The main source's typical position is the
 //! median, over the days of largest volume change by the encoder, of each day's least-squares
-//! source (the source and the network's translations, started from the encoder's). The families are then
-//! fitted to what F, linearised around that typical state, cannot produce: each day's
+//! source (the source and the network's translations, started from the encoder's). The families
+//! are then fitted to what F, linearised around that typical state, cannot produce: each day's
 //! observation less F's time-dependent declared effects, in the data's standardised units (the
 //! paper's metric), projected off the declared latent effects and off the main source, each
 //! channel's mean over the analysed split removed (a channel missing on a day takes the model's
@@ -24,12 +24,13 @@
 //! locate a source (and `second_source` scores its episode). Held, a second source stays in
 //! the residuals whole, and so does a main source that really moves between its episodes.
 
-use super::{effect_bounds, lsq, GnssProblem, Network};
+use super::{lsq, GnssProblem, Network};
 use crate::analysis::projection::{orthonormal, project, scaled};
 use crate::analysis::MainSource;
 use crate::data::SplitName;
 use crate::model::OwnedEffect;
 use crate::numerics::median;
+use crate::problem::Problem as _;
 use anyhow::{anyhow, bail, Result};
 use magic_core::{invert_at, mogi, Model, Workspace};
 use nalgebra::{DMatrix, DVector};
@@ -593,11 +594,10 @@ fn main_source(p: &GnssProblem, rows: &[Day], days: &[f64]) -> Result<[f64; 3]> 
     let mut by_dv: Vec<usize> = (0..rows.len()).collect();
     by_dv.sort_by(|&a, &b| rows[b].params[3].abs().total_cmp(&rows[a].params[3].abs()));
     let top = &by_dv[..(by_dv.len() / 4).max(1)];
-    let common = OwnedEffect::CommonMode;
-    let bytes = common.bytes();
-    let effects = [common.borrow(&bytes)];
-    let mut bounds = p.source_bounds.0.to_vec();
-    bounds.extend(effect_bounds(&common));
+    let common = [OwnedEffect::CommonMode];
+    let bytes = common[0].bytes();
+    let effects = [common[0].borrow(&bytes)];
+    let bounds = p.bounds(&common);
     let pb = lsq::Problem {
         stations: &p.network.stations,
         effects: &effects,

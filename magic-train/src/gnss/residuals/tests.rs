@@ -304,7 +304,7 @@ fn a_deep_encoder_source_is_refitted_where_the_data_put_it() {
     let bytes = common.bytes();
     let effects = [common.borrow(&bytes)];
     let mut bounds = magic_core::mogi::PAPER_BOUNDS.to_vec();
-    bounds.extend(effect_bounds(&common));
+    bounds.extend(crate::gnss::effect_bounds(&common));
     let scale = vec![1.0; nc];
     let pb = lsq::Problem {
         stations,
