@@ -9,11 +9,11 @@
 
 use super::lsq::{self, Grid, Options, Problem};
 use super::plausibility::plausible;
-use super::{effect_bounds, GnssProblem};
+use super::GnssProblem;
 use crate::data::{day_number, SplitName};
 use crate::model::OwnedEffect;
 use crate::numerics::median;
-use crate::problem::Metric;
+use crate::problem::{Metric, Problem as _};
 use anyhow::{anyhow, bail, Context, Result};
 use magic_core::effects::{mogi_with_effects, Effect};
 use magic_core::mogi::PARAM_NAMES;
@@ -130,10 +130,7 @@ pub fn fit_split_with(
         .zip(&bytes)
         .map(|(e, b)| e.borrow(b))
         .collect();
-    let mut bounds: Vec<[f64; 2]> = p.source_bounds.0.to_vec();
-    for e in effects {
-        bounds.extend(effect_bounds(e));
-    }
+    let bounds = p.bounds(effects);
     let pb = Problem {
         stations: &p.network.stations,
         effects: &core,
