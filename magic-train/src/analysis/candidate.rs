@@ -10,8 +10,9 @@
 //! a family whose score is a transient's gain sets its floor in days' worth of residual variance
 //! instead: [`Family::min_excess`](super::Family::min_excess)).
 //! A family with a detection statistic (the step scan's peak) is also significant when the
-//! statistic [`stands_out`] of its surrogates' by a like rule and the score exceeds chance: a
-//! clear local effect is worth its term though it explains little of the whole network.
+//! statistic [`stands_out`] of its surrogates' by a like rule and the score is above 0 (a
+//! statistic that vetoes, the step's) or above chance (one that only supports): a clear local
+//! effect is worth its term though it explains little of the whole network.
 
 use super::Rejection;
 use crate::model::OwnedEffect;

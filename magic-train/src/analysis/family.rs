@@ -52,9 +52,10 @@ pub trait Family<R>: Sync {
     /// a level that wanders for years explains held-out days like a step, but only a step is
     /// sharper than the noise makes its local jumps); `None` for most families.
     /// A statistic that stands out of the surrogates' by a margin like the score's
-    /// ([`stands_out`]) makes the fit significant once its
-    /// held-out score exceeds chance at all: a local effect (a step in the record's last
-    /// months) can be clear and still explain little of the whole network's variance.
+    /// ([`stands_out`]) makes the fit significant once its held-out score is above 0 (a
+    /// vetoing statistic) or above chance (a supporting one): a local effect (a step in the
+    /// record's last months) can be clear and still explain little of the whole network's
+    /// variance.
     fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
         None
     }
@@ -141,7 +142,7 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
                         statistic: stat,
                         largest: top,
                     });
-                } else if c.excess() > 0.0 {
+                } else if carries(self.statistic_vetoes(), &c) {
                     c.significant |= stands_out(stat, &of_surrogates);
                 }
             }
@@ -151,6 +152,20 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
             c.uncertainty = bootstrap(self, res, &fit, opts)?;
         }
         Ok(c)
+    }
+}
+
+/// Whether a candidate's held-out score lets a statistic that [`stands_out`] make it significant.
+/// A vetoing statistic is the detection test itself (above every surrogate's, and calibrated on
+/// them with the look-elsewhere of its scan): the score need only show that the fit predicts the
+/// days it was not fitted on (above 0) — a step in the record's last months explains less of the
+/// network's variance than the surrogates' best steps, placed mid-record, do. A supporting
+/// statistic carries a score above chance.
+fn carries(vetoes: bool, c: &Candidate) -> bool {
+    if vetoes {
+        c.variance_explained > 0.0
+    } else {
+        c.excess() > 0.0
     }
 }
 
@@ -268,8 +283,12 @@ mod tests {
         assert_eq!(c.statistic.as_ref().map(|s| s.1.len()), Some(20));
         // A statistic above the surrogates' largest but not by the margin: not significant.
         assert!(!assess(0.0125, 26.0).significant);
-        // Below chance, however large the statistic: not significant.
-        assert!(!assess(0.005, 90.0).significant);
+        // Below chance but above 0 (a step in the record's last months): significant by the
+        // statistic, which vetoes; at or below 0, however large the statistic: not.
+        let c = assess(0.005, 90.0);
+        assert!(c.excess() < 0.0 && c.significant, "{c:?}");
+        assert!(!assess(0.0, 90.0).significant);
+        assert!(!assess(-0.001, 90.0).significant);
         // A score beyond its margin with a statistic the surrogates reach: rejected.
         let c = assess(0.2, 22.0);
         assert!(!c.significant && c.rejected.is_some(), "{c:?}");
@@ -279,7 +298,8 @@ mod tests {
     #[test]
     fn a_statistic_that_only_supports_never_rejects() {
         // The same fits with a statistic that does not veto: a score beyond its margin stands
-        // whatever the statistic; one just above chance still needs the statistic to stand out.
+        // whatever the statistic; one just above chance still needs the statistic to stand out,
+        // and one below chance is not carried by it.
         let c = assess_toy(0.2, 22.0, false);
         assert!(c.significant && c.rejected.is_none(), "{c:?}");
         assert!(assess_toy(0.0125, 90.0, false).significant);

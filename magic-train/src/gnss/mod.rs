@@ -276,9 +276,11 @@ impl Problem for GnssProblem {
     fn families(&self) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
         families::all()
     }
-    /// A step at a higher-ranked lasting source's onset is that onset ([`families::onset`]).
+    /// A step at a higher-ranked lasting source's onset is that onset ([`families::onset`]);
+    /// one at a station a higher-ranked drift moves is that drift ([`families::drifting`]).
     fn reconcile(&self, res: &GnssResiduals, effects: &mut [Candidate]) {
         families::onset::mark_onsets(&res.ctx.network, effects);
+        families::drifting::mark_drifting(&res.ctx.network, effects);
     }
     fn describe_residuals(&self, res: &GnssResiduals) -> (serde_json::Value, String) {
         res.describe()

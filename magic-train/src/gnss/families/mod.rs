@@ -8,6 +8,7 @@
 pub mod common_mode;
 pub mod dated;
 pub mod drift;
+pub mod drifting;
 pub mod elevation;
 pub mod lasting_source;
 pub mod latent;
