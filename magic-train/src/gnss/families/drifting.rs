@@ -55,21 +55,9 @@ pub fn mark_drifting(network: &Network, effects: &mut [Candidate]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use magic_core::mogi::Station;
     use serde_json::json;
 
-    /// Three stations.
-    fn network() -> Network {
-        let at = |x_km: f64| Station {
-            x_km,
-            y_km: 0.0,
-            z_km: 0.0,
-        };
-        Network {
-            names: vec!["A".into(), "B".into(), "C".into()],
-            stations: vec![at(0.0), at(5.0), at(10.0)],
-        }
-    }
+    use super::super::three_stations as network;
 
     fn significant(family: &str, score: f64, e: OwnedEffect) -> Candidate {
         let noise = vec![0.001, 0.002, 0.0015, 0.001, 0.002];

@@ -46,3 +46,17 @@ pub fn iso_date(day: f64) -> String {
     let (y, m, d) = magic_core::time::civil_from_days(day.round() as i64);
     format!("{y:04}-{m:02}-{d:02}")
 }
+
+/// Three stations in a row, 5 km apart, named A, B, C (the reconciling rules' tests).
+#[cfg(test)]
+pub(crate) fn three_stations() -> crate::gnss::Network {
+    let at = |x_km: f64| magic_core::mogi::Station {
+        x_km,
+        y_km: 0.0,
+        z_km: 0.0,
+    };
+    crate::gnss::Network {
+        names: vec!["A".into(), "B".into(), "C".into()],
+        stations: vec![at(0.0), at(5.0), at(10.0)],
+    }
+}

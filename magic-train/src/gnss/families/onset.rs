@@ -117,21 +117,10 @@ pub fn mark_onsets(network: &Network, effects: &mut [Candidate]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use magic_core::mogi::Station;
     use serde_json::json;
 
-    /// Three stations in a row; a deflation under the first.
-    fn network() -> Network {
-        let at = |x_km: f64| Station {
-            x_km,
-            y_km: 0.0,
-            z_km: 0.0,
-        };
-        Network {
-            names: vec!["A".into(), "B".into(), "C".into()],
-            stations: vec![at(0.0), at(5.0), at(10.0)],
-        }
-    }
+    // Three stations in a row (A, B, C); the tests put a deflation under the first.
+    use super::super::three_stations as network;
 
     fn lasting(score: f64) -> Candidate {
         let params = json!({"x_km": 1.0, "y_km": 0.0, "depth_km": 3.0,
