@@ -59,18 +59,19 @@ mod tests {
 
     use super::super::three_stations as network;
 
-    fn significant(family: &str, score: f64, e: OwnedEffect) -> Candidate {
+    /// A candidate scoring `score` against the same surrogate scores (chance about 0.002).
+    fn candidate(family: &str, score: f64, e: OwnedEffect) -> Candidate {
         let noise = vec![0.001, 0.002, 0.0015, 0.001, 0.002];
-        let c = Candidate::from_scores(family, score, noise, 0.95, json!({}), Some(e));
-        assert!(c.significant);
-        c
+        Candidate::from_scores(family, score, noise, 0.95, json!({}), Some(e))
     }
 
     /// A drift at station B (its up component only).
     fn drift(score: f64) -> Candidate {
         let mut rate = vec![0.0; 9];
         rate[2 * 3 + 1] = 4.0;
-        significant("drift", score, OwnedEffect::Drift { t0_day: 0.0, rate })
+        let c = candidate("drift", score, OwnedEffect::Drift { t0_day: 0.0, rate });
+        assert!(c.significant);
+        c
     }
 
     /// A step at `station` scoring `score`; significant by its statistic when below chance.
@@ -80,8 +81,7 @@ mod tests {
             epoch_day: 15_000.0,
             offset_mm: [1.0, 1.0, 5.0],
         };
-        let noise = vec![0.001, 0.002, 0.0015, 0.001, 0.002];
-        let mut c = Candidate::from_scores("step", score, noise, 0.95, json!({}), Some(effect));
+        let mut c = candidate("step", score, effect);
         c.significant = true;
         c
     }
