@@ -52,6 +52,10 @@ pub enum Rejection {
         /// The least share accepted.
         least: f64,
     },
+    /// Its fit over the whole record, the one F would take, adds nothing (a drift whose
+    /// held-out fits each found a station in part of the record, though no station's rate
+    /// stands out over all of it), in words that say why.
+    NothingToAdd(&'static str),
     /// Taken for part of another candidate's effect (a step at a lasting source's onset), in
     /// words that name it ([`Problem::reconcile`](crate::problem::Problem::reconcile)).
     PartOf(String),
@@ -105,6 +109,7 @@ impl fmt::Display for Rejection {
                 "its field mostly a move of the main source ({share:.2} of it beyond, at least \
                  {least:.2} needed)"
             ),
+            Rejection::NothingToAdd(why) => write!(f, "nothing to add: {why}"),
             Rejection::PartOf(why) => f.write_str(why),
         }
     }
@@ -141,6 +146,12 @@ mod tests {
         };
         assert_eq!(stat.bound(), None);
         assert_eq!(Rejection::PartOf("its onset".into()).bound(), None);
+        let empty = Rejection::NothingToAdd("no station's rate stands out");
+        assert_eq!(empty.bound(), None);
+        assert_eq!(
+            empty.to_string(),
+            "nothing to add: no station's rate stands out"
+        );
         let near = Rejection::Unresolvable {
             share: 0.13,
             least: 0.25,

@@ -5,7 +5,7 @@
 use super::dated::{self, Scored, TimeFit};
 use super::latent::round3;
 use crate::analysis::projection::{deproject, projected_response};
-use crate::analysis::Family;
+use crate::analysis::{Family, Rejection};
 use crate::gnss::residuals::Block;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
@@ -177,6 +177,13 @@ impl Family<GnssResiduals> for Drift {
         }
         json!({"rate_mm_per_yr": m, "t0": super::iso_date(f.t0)})
     }
+    /// A fit that explains held-out days though its whole-record rates select no station: the
+    /// held-out fits' drifts were local to their periods, and the effect F would take is zero.
+    fn reject(&self, _res: &GnssResiduals, fit: &Self::Fit) -> Option<Rejection> {
+        (fit.fit.chans.is_empty() && fit.score > 0.0).then_some(Rejection::NothingToAdd(
+            "no station's rate stands out over the whole record",
+        ))
+    }
     fn declare(&self, res: &GnssResiduals, fit: &Self::Fit) -> Option<OwnedEffect> {
         Some(OwnedEffect::Drift {
             t0_day: fit.fit.t0 as f32,
@@ -192,7 +199,12 @@ mod tests {
 
     /// Two stations × 3 components over 1 200 days of noise, with `f(t)` added to station 0.
     fn block(f: &dyn Fn(usize) -> f64) -> Block {
-        let (ns, nc, t_n) = (2usize, 6usize, 1200usize);
+        stations(2, f)
+    }
+
+    /// `ns` stations × 3 components over 1 200 days of noise, with `f(t)` added to station 0.
+    fn stations(ns: usize, f: &dyn Fn(usize) -> f64) -> Block {
+        let (nc, t_n) = (3 * ns, 1200usize);
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         let mut r: Vec<f64> = (0..t_n * nc).map(|_| rng.random_range(-0.5..0.5)).collect();
         for t in 0..t_n {
@@ -212,5 +224,19 @@ mod tests {
         assert!(!ramp_beats_step(&step, 6, 2, 0));
         let ramp = block(&|t| 3.0 * t as f64 / 1200.0);
         assert!(ramp_beats_step(&ramp, 6, 2, 0));
+    }
+
+    #[test]
+    fn a_record_without_an_outlying_rate_selects_no_station_and_adds_nothing() {
+        let ns = 8;
+        let fit = |b: &Block| fit_block(b, &vec![1.0; 3 * ns], ns, &[]);
+        assert!(fit(&stations(ns, &|_| 0.0)).chans.is_empty());
+        let ramp = fit(&stations(ns, &|t| 3.0 * t as f64 / 1200.0));
+        assert_eq!(ramp.chans, [0, ns, 2 * ns]);
+        assert!(
+            ramp.rates.iter().all(|r| (r - 0.91).abs() < 0.1),
+            "{:?}",
+            ramp.rates
+        );
     }
 }

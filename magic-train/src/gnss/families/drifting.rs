@@ -5,9 +5,16 @@
 //! held-out score stays below chance: a level that wanders predicts held-out days no better than
 //! the surrogates' best steps. A step significant by its statistic alone (score below chance,
 //! [`crate::analysis::Family::statistic`]) is taken for a significant `drift` ranked above it at
-//! the same station — no longer significant, and the reason said. A step whose score is above
-//! chance stays (a real step mid-record draws a drift at its station too). The loop declares the
-//! drift first and judges the station's steps again on what it leaves.
+//! the same station — no longer significant, and the reason said.
+//!
+//! The other way round, a step mid-record draws a drift at its station: a trend fitted to a step
+//! explains at most three quarters of it, a step fitted to a trend as much, and the drift's
+//! chance level (no surrogate's station stands out) is far below the step's (every station and
+//! epoch scanned), so the drift can rank above the step. Both significant, the one that explains
+//! the station's held-out days less is the other: a drift at the station of a step whose score
+//! is above chance and above the drift's is no longer significant. The loop declares the one
+//! kept and judges the other again on what it leaves (a real drift beside a real step is found
+//! in the next round).
 
 use crate::analysis::{Candidate, Rejection};
 use crate::gnss::Network;
@@ -19,8 +26,21 @@ fn drifts(rate: &[f32], ns: usize, station: usize) -> bool {
     (0..3).any(|k| rate.get(k * ns + station).is_some_and(|r| *r != 0.0))
 }
 
-/// Marks each step significant with a score below chance at a station a significant `drift`
-/// ranked above it moves (`effects` ranked, best first) as not significant, with the reason.
+/// Whether `c` is a significant, unrejected `drift` that moves `station`.
+fn drift_at(c: &Candidate, ns: usize, station: usize) -> bool {
+    c.family == "drift"
+        && c.significant
+        && c.rejected.is_none()
+        && match &c.effect {
+            Some(OwnedEffect::Drift { rate, .. }) => drifts(rate, ns, station),
+            _ => false,
+        }
+}
+
+/// Reconciles the significant steps and drifts at one station (`effects` ranked, best first):
+/// a step with a score below chance under a drift ranked above it is the drift; a drift under
+/// a step whose score is above chance and above the drift's is the step. Each marked one is no
+/// longer significant, with the reason.
 pub fn mark_drifting(network: &Network, effects: &mut [Candidate]) {
     let ns = network.stations.len();
     for i in 0..effects.len() {
@@ -28,22 +48,29 @@ pub fn mark_drifting(network: &Network, effects: &mut [Candidate]) {
         let Some(OwnedEffect::Step { station, .. }) = c.effect else {
             continue;
         };
-        if !c.significant || c.rejected.is_some() || c.excess() > 0.0 {
+        if !c.significant || c.rejected.is_some() {
             continue;
         }
-        let drifting = effects[..i]
+        let s = usize::from(station);
+        let name = network
+            .names
+            .get(s)
+            .map_or("its station", String::as_str)
+            .to_string();
+        let (score, excess) = (c.variance_explained, c.excess());
+        if excess > 0.0 {
+            for d in effects.iter_mut() {
+                if drift_at(d, ns, s) && d.variance_explained < score {
+                    d.significant = false;
+                    d.rejected = Some(Rejection::PartOf(format!(
+                        "the step at {name}, which explains more (a step mid-record fits a trend)"
+                    )));
+                }
+            }
+        } else if effects[..i]
             .iter()
-            .filter(|d| d.family == "drift" && d.significant && d.rejected.is_none())
-            .filter(|d| d.excess() > c.excess())
-            .any(|d| match &d.effect {
-                Some(OwnedEffect::Drift { rate, .. }) => drifts(rate, ns, station.into()),
-                _ => false,
-            });
-        if drifting {
-            let name = network
-                .names
-                .get(usize::from(station))
-                .map_or("its station", String::as_str);
+            .any(|d| drift_at(d, ns, s) && d.excess() > excess)
+        {
             effects[i].significant = false;
             effects[i].rejected = Some(Rejection::PartOf(format!(
                 "the drift ranked above it at {name} (a trend peaks the step scan)"
@@ -101,12 +128,34 @@ mod tests {
     }
 
     #[test]
-    fn a_step_above_chance_elsewhere_or_ranked_above_stays() {
+    fn a_drift_at_the_station_of_a_step_that_explains_more_is_the_step() {
+        for mut e in [
+            vec![drift(0.02), step(0.03, 1)],
+            vec![step(0.3, 1), drift(0.2)],
+        ] {
+            mark_drifting(&network(), &mut e);
+            let (d, s) = if e[0].family == "drift" {
+                (&e[0], &e[1])
+            } else {
+                (&e[1], &e[0])
+            };
+            assert!(s.significant && s.rejected.is_none(), "{s:?}");
+            assert!(!d.significant, "{d:?}");
+            assert!(
+                matches!(&d.rejected, Some(Rejection::PartOf(w)) if w.contains("step") && w.contains('B')),
+                "{:?}",
+                d.rejected
+            );
+        }
+    }
+
+    #[test]
+    fn a_step_above_chance_elsewhere_or_explaining_less_stays_beside_the_drift() {
         for mut e in [
             vec![drift(0.2), step(0.03, 1)],
             vec![drift(0.2), step(0.0015, 0)],
             vec![drift(0.2), step(0.0015, 2)],
-            vec![step(0.3, 1), drift(0.2)],
+            vec![step(0.3, 0), drift(0.2)],
         ] {
             mark_drifting(&network(), &mut e);
             assert!(
