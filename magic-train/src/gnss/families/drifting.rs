@@ -7,14 +7,14 @@
 //! [`crate::analysis::Family::statistic`]) is taken for a significant `drift` ranked above it at
 //! the same station — no longer significant, and the reason said.
 //!
-//! The other way round, a step mid-record draws a drift at its station: a trend fitted to a step
-//! explains at most three quarters of it, a step fitted to a trend as much, and the drift's
-//! chance level (no surrogate's station stands out) is far below the step's (every station and
-//! epoch scanned), so the drift can rank above the step. Both significant, the one that explains
-//! the station's held-out days less is the other: a drift at the station of a step whose score
-//! is above chance and above the drift's is no longer significant. The loop declares the one
-//! kept and judges the other again on what it leaves (a real drift beside a real step is found
-//! in the next round).
+//! The other way round, a step mid-record draws a drift at its station (the drift's fit is the
+//! step's trend: its rates point along the step's offset), and the drift can rank above it: no
+//! surrogate's station stands out, so its chance level is near 0, while the step's pays for
+//! every station and epoch scanned; once another effect is declared the trend can even explain
+//! more of the held-out days than the step. The step's score tells the two apart: a drift's step
+//! stays below chance, a real step's is above. A drift at the station of a significant step whose
+//! score is above chance is that step. The loop declares the one kept and judges the other again
+//! on what it leaves (a real drift beside a real step is found in the next round).
 
 use crate::analysis::{Candidate, Rejection};
 use crate::gnss::Network;
@@ -38,9 +38,9 @@ fn drift_at(c: &Candidate, ns: usize, station: usize) -> bool {
 }
 
 /// Reconciles the significant steps and drifts at one station (`effects` ranked, best first):
-/// a step with a score below chance under a drift ranked above it is the drift; a drift under
-/// a step whose score is above chance and above the drift's is the step. Each marked one is no
-/// longer significant, with the reason.
+/// a step with a score below chance under a drift ranked above it is the drift; a drift at the
+/// station of a step whose score is above chance is the step. Each marked one is no longer
+/// significant, with the reason.
 pub fn mark_drifting(network: &Network, effects: &mut [Candidate]) {
     let ns = network.stations.len();
     for i in 0..effects.len() {
@@ -57,13 +57,13 @@ pub fn mark_drifting(network: &Network, effects: &mut [Candidate]) {
             .get(s)
             .map_or("its station", String::as_str)
             .to_string();
-        let (score, excess) = (c.variance_explained, c.excess());
+        let excess = c.excess();
         if excess > 0.0 {
             for d in effects.iter_mut() {
-                if drift_at(d, ns, s) && d.variance_explained < score {
+                if drift_at(d, ns, s) {
                     d.significant = false;
                     d.rejected = Some(Rejection::PartOf(format!(
-                        "the step at {name}, which explains more (a step mid-record fits a trend)"
+                        "the step at {name}, above chance (a step mid-record fits a trend)"
                     )));
                 }
             }
@@ -128,8 +128,9 @@ mod tests {
     }
 
     #[test]
-    fn a_drift_at_the_station_of_a_step_that_explains_more_is_the_step() {
+    fn a_drift_at_the_station_of_a_step_above_chance_is_the_step() {
         for mut e in [
+            vec![drift(0.2), step(0.03, 1)],
             vec![drift(0.02), step(0.03, 1)],
             vec![step(0.3, 1), drift(0.2)],
         ] {
@@ -150,9 +151,9 @@ mod tests {
     }
 
     #[test]
-    fn a_step_above_chance_elsewhere_or_explaining_less_stays_beside_the_drift() {
+    fn a_step_and_a_drift_at_different_stations_both_stay() {
         for mut e in [
-            vec![drift(0.2), step(0.03, 1)],
+            vec![drift(0.2), step(0.03, 0)],
             vec![drift(0.2), step(0.0015, 0)],
             vec![drift(0.2), step(0.0015, 2)],
             vec![step(0.3, 0), drift(0.2)],
