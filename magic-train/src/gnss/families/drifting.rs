@@ -52,11 +52,7 @@ pub fn mark_drifting(network: &Network, effects: &mut [Candidate]) {
             continue;
         }
         let s = usize::from(station);
-        let name = network
-            .names
-            .get(s)
-            .map_or("its station", String::as_str)
-            .to_string();
+        let name = network.names.get(s).map_or("its station", String::as_str);
         let excess = c.excess();
         if excess > 0.0 {
             for d in effects.iter_mut() {
