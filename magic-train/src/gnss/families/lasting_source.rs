@@ -526,17 +526,16 @@ mod tests {
         assert!(by_statistic.iter().all(|c| c.2 != 30), "{by_statistic:?}");
     }
 
-    /// The injected change alone (the scenario's rows less the clean rows of the same seed),
-    /// standardised and projected as the data's residuals are, in their time order: what the
-    /// search sees of the effect without the noise.
+    /// The injected change alone (the scenario's rows less the clean rows of the same seed) over
+    /// the splits `res` analyses, standardised and projected as its residuals are, in their time
+    /// order: what the search sees of the effect without the noise.
     fn change_alone(
         with: &crate::gnss::GnssProblem,
         clean: &crate::gnss::GnssProblem,
         res: &GnssResiduals,
     ) -> GnssResiduals {
-        use crate::data::SplitName;
         let mut rows: Vec<(f64, Vec<f64>)> = Vec::new();
-        for name in [SplitName::Train, SplitName::Valid, SplitName::Test] {
+        for &name in &res.ctx.splits {
             let (a, b) = (with.data.split(name), clean.data.split(name));
             for ((ra, rb), day) in a.x.iter().zip(&b.x).zip(a.days()) {
                 let (pa, pb) = (with.data.physical_row(ra), clean.data.physical_row(rb));
