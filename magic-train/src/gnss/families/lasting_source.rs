@@ -32,6 +32,7 @@ use super::second_source::{
     declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
     translations, unresolvable, with_translations,
 };
+use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
 use crate::analysis::{Family, Rejection};
 use crate::gnss::residuals::SourceGrid;
@@ -290,6 +291,82 @@ fn surrogate_beside_moves(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) 
     res.beside_moves(drawn, &rest)
 }
 
+/// A change that stays, as a daily amplitude shows it: its mean before the onset and after,
+/// and the rows where it begins and ends (the day after the last one before the onset on which
+/// the 30-day running mean had gone at most 10 % of the way from the mean before to the mean
+/// after; the first on which it has gone 90 %).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Change {
+    before: f64,
+    after: f64,
+    begun: usize,
+    done: usize,
+}
+
+impl Change {
+    /// The change in the daily amplitude `a` at row `onset`.
+    fn of(a: &[f64], onset: usize) -> Change {
+        let (n, e) = (a.len(), onset.min(a.len()));
+        let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len().max(1) as f64;
+        let (before, after) = (mean(&a[..e]), mean(&a[e..]));
+        let smooth = |t: usize| mean(&a[t.saturating_sub(15)..(t + 16).min(n)]);
+        let gone = |t: usize| (smooth(t) - before) / (after - before);
+        let begun = (0..e).rev().find(|&t| gone(t) <= 0.1).map_or(e, |t| t + 1);
+        let done = (e..n).find(|&t| gone(t) >= 0.9).unwrap_or(e);
+        Change {
+            before,
+            after,
+            begun,
+            done,
+        }
+    }
+
+    /// The modelled amplitude at row `t`: the mean before, a straight ramp from where the change
+    /// begins to where it ends, the mean after.
+    fn at(&self, t: usize) -> f64 {
+        if t < self.begun {
+            self.before
+        } else if t >= self.done {
+            self.after
+        } else {
+            let f = (t - self.begun) as f64 / (self.done - self.begun) as f64;
+            self.before + f * (self.after - self.before)
+        }
+    }
+}
+
+/// The lasting source's bootstrap draw: the change kept as modelled ([`Change`] of the source's
+/// daily amplitude beside the translations, whose daily fits are kept too), everything else
+/// phase-randomised with phases shared by every channel ([`latent::coherent_draw_keeping`]);
+/// drawn where the source is located, as [`resample_at`] draws a second source's. A second
+/// source is a daily amplitude, so its draw keeps the daily fit; kept here, the daily fit would
+/// hold the slow noise along the pattern — at a source whose field one station dominates, most of
+/// that station's own — in every draw, and the held-out stations' score, which predicts that
+/// station from the others, would see the same noise each time.
+fn resample_change(res: &GnssResiduals, fit: &LastingFit, rng: &mut StdRng) -> GnssResiduals {
+    let loc = res.locating();
+    let nc = loc.nc();
+    let mut cols: Vec<(Vec<f64>, f64)> = translations(loc).into_iter().map(scaled).collect();
+    cols.push(scaled(pattern(loc, fit.pos)));
+    let basis = orthonormal(&cols, 1e-9, 2);
+    let Some(q) = basis.last().filter(|_| basis.len() == cols.len()) else {
+        return resample_at(res, fit.pos, rng);
+    };
+    // The source's daily amplitude beside the translations (q is its part orthogonal to them).
+    let a = latent::daily_amplitude(&loc.fit.r, nc, q);
+    let change = Change::of(&a, fit.onset);
+    let (mut kept, _) = latent::split_effect(&loc.fit.r, nc, &basis);
+    for (t, (row, at)) in kept.chunks_mut(nc).zip(&a).enumerate() {
+        let off = at - change.at(t);
+        row.iter_mut().zip(q).for_each(|(k, qc)| *k -= off * qc);
+    }
+    let drawn = loc.with_fit(latent::coherent_draw_keeping(&loc.fit.r, nc, &kept, rng));
+    match res.held {
+        Some(_) => res.with_held(drawn),
+        None => drawn,
+    }
+}
+
 impl Family<GnssResiduals> for LastingSource {
     type Fit = LastingFit;
 
@@ -329,13 +406,12 @@ impl Family<GnssResiduals> for LastingSource {
     fn params(&self, res: &GnssResiduals, fit: &LastingFit) -> serde_json::Value {
         let g = pattern(res, fit.pos);
         let dv = latent::daily_amplitude(&res.fit.r, res.nc(), &g);
-        let (n, e) = (dv.len(), fit.onset.min(dv.len()));
-        let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len().max(1) as f64;
-        let (before, after) = (mean(&dv[..e]), mean(&dv[e..]));
-        let smooth = |t: usize| mean(&dv[t.saturating_sub(15)..(t + 16).min(n)]);
-        let gone = |t: usize| (smooth(t) - before) / (after - before);
-        let begun = (0..e).rev().find(|&t| gone(t) <= 0.1).map_or(e, |t| t + 1);
-        let done = (e..n).find(|&t| gone(t) >= 0.9).unwrap_or(e);
+        let Change {
+            before,
+            after,
+            begun,
+            done,
+        } = Change::of(&dv, fit.onset);
         let date = |i: usize| {
             res.fit
                 .days
@@ -344,7 +420,7 @@ impl Family<GnssResiduals> for LastingSource {
         };
         json!({
             "x_km": round3(fit.pos[0]), "y_km": round3(fit.pos[1]), "depth_km": round3(fit.pos[2]),
-            "onset": date(e), "start": date(begun), "end": date(done),
+            "onset": date(fit.onset.min(dv.len())), "start": date(begun), "end": date(done),
             "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
         })
     }
@@ -361,7 +437,7 @@ impl Family<GnssResiduals> for LastingSource {
         fit: &LastingFit,
         rng: &mut StdRng,
     ) -> Option<Result<GnssResiduals>> {
-        Some(Ok(resample_at(res, fit.pos, rng)))
+        Some(Ok(resample_change(res, fit, rng)))
     }
     fn declare(&self, _: &GnssResiduals, fit: &LastingFit) -> Option<OwnedEffect> {
         declare_at(fit.pos, fit.score)
@@ -380,6 +456,39 @@ mod tests {
         assert!(LASTING_DEPTHS.windows(2).all(|w| w[0] < w[1]));
         assert_eq!(LASTING_DEPTHS[..2], [1.0, 1.5]);
         assert_eq!(LASTING_DEPTHS[2..], GRID_DEPTHS);
+    }
+
+    #[test]
+    fn a_change_is_modelled_as_its_means_and_a_ramp_between() {
+        // 600 days: 1 until day 200, a straight ramp to −3 by day 300, −3 after; onset at 250.
+        let a: Vec<f64> = (0..600)
+            .map(|t| match t {
+                0..200 => 1.0,
+                200..300 => 1.0 - 4.0 * (t - 200) as f64 / 100.0,
+                _ => -3.0,
+            })
+            .collect();
+        let c = Change::of(&a, 250);
+        // Means about the onset: 250 days before (200 at 1, 50 on the ramp's first half), 350
+        // after.
+        let before = (200.0 + (0..50).map(|u| 1.0 - 0.04 * u as f64).sum::<f64>()) / 250.0;
+        let after = ((50..100).map(|u| 1.0 - 0.04 * u as f64).sum::<f64>() - 900.0) / 350.0;
+        assert!((c.before - before).abs() < 1e-12 && (c.after - after).abs() < 1e-12);
+        // Begun and done where the 30-day mean crosses 10 % and 90 % of the way.
+        assert!(
+            c.begun > 150 && c.begun < 250 && c.done > 250 && c.done < 320,
+            "{c:?}"
+        );
+        assert_eq!((c.at(0), c.at(c.begun - 1)), (c.before, c.before));
+        assert_eq!((c.at(c.done), c.at(599)), (c.after, c.after));
+        let mid = c.at((c.begun + c.done) / 2);
+        assert!(mid < c.before && mid > c.after);
+        // No change at all: a step of nothing at the onset.
+        let flat = Change::of(&[2.0; 100], 40);
+        assert_eq!(
+            (flat.begun, flat.done, flat.at(0), flat.at(99)),
+            (40, 40, 2.0, 2.0)
+        );
     }
 
     #[test]

@@ -424,6 +424,14 @@ fn coherent_draw(r: &[f64], nc: usize, patterns: &[Vec<f64>], rng: &mut StdRng) 
     noise.iter().zip(&effect).map(|(n, e)| n + e).collect()
 }
 
+/// A draw of the rows `r` that keeps the rows `kept` (an effect as modelled) and phase-randomises
+/// the rest as [`resample_coherent`] does: `kept + draw(r − kept)`.
+pub fn coherent_draw_keeping(r: &[f64], nc: usize, kept: &[f64], rng: &mut StdRng) -> Vec<f64> {
+    let noise: Vec<f64> = r.iter().zip(kept).map(|(a, k)| a - k).collect();
+    let noise = PhaseSurrogates::new(&noise, nc).draw(rng);
+    noise.iter().zip(kept).map(|(n, k)| n + k).collect()
+}
+
 /// Whether every pattern projects to (numerically) nothing: F already produces it.
 pub fn declared(patterns: &[Vec<f64>]) -> bool {
     patterns
@@ -539,6 +547,22 @@ mod tests {
         for (x, y) in a.iter().zip(&b) {
             assert!((x - y).abs() < 1e-9 * a[0], "cross product {x} vs {y}");
         }
+    }
+
+    #[test]
+    fn a_draw_keeping_the_rows_gives_them_back_and_one_keeping_nothing_randomises_them() {
+        let (nc, n) = (3usize, 256usize);
+        let r = noise(n * nc, 7);
+        let mut rng = StdRng::seed_from_u64(1);
+        let same = coherent_draw_keeping(&r, nc, &r, &mut rng);
+        assert!(same.iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-12));
+        // Keeping nothing: a phase surrogate of the rows (cross products kept, the rows not).
+        let drawn = coherent_draw_keeping(&r, nc, &vec![0.0; r.len()], &mut rng);
+        let (a, b) = (cross_products(&r, nc), cross_products(&drawn, nc));
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() < 1e-9 * a[0], "cross product {x} vs {y}");
+        }
+        assert!(drawn.iter().zip(&r).any(|(a, b)| (a - b).abs() > 0.1));
     }
 
     #[test]
