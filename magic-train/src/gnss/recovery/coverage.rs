@@ -24,8 +24,15 @@ pub struct Coverage {
 /// assert_eq!(truth_value("offset_u_mm", &p), Some(3.5));
 /// assert_eq!(truth_value("epoch_day", &p), Some(10.0));
 /// assert_eq!(truth_value("rms_n_mm", &p), None);
+/// // A parameter on a log scale: the logarithm of the named one, if positive.
+/// let s = serde_json::json!({"depth_km": 3.5, "dv": -1.0});
+/// assert_eq!(truth_value("ln_depth_km", &s), Some(3.5f64.ln()));
+/// assert_eq!(truth_value("ln_dv", &s), None);
 /// ```
 pub fn truth_value(param: &str, truth: &Value) -> Option<f64> {
+    if let Some(rest) = param.strip_prefix("ln_") {
+        return truth_value(rest, truth).filter(|v| *v > 0.0).map(f64::ln);
+    }
     let component = |name: &str, k: usize| truth.get(name)?.get(k)?.as_f64();
     let axis = |s: &str| ["e", "n", "u"].iter().position(|a| *a == s);
     if let Some(rest) = param
