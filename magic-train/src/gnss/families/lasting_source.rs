@@ -58,6 +58,10 @@ pub const LASTING_DEPTHS: [f64; 15] = [
     1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0, 15.0, 20.0,
 ];
 
+/// The smallest depth (km) whose logarithm a key parameter takes (a fit without a position has
+/// depth 0; every grid depth is larger).
+const MIN_DEPTH_KM: f64 = 1e-3;
+
 /// The lasting source's search grid ([`LASTING_DEPTHS`]; computed once per set of residuals).
 fn lasting_grid(res: &GnssResiduals) -> &SourceGrid {
     res.ctx
@@ -428,8 +432,13 @@ impl Family<GnssResiduals> for LastingSource {
         let loc = res.locating();
         on_bound(&lasting_grid(loc).points, fit.pos).or_else(|| unresolvable(loc, fit.pos))
     }
+    /// Position, and the depth's natural logarithm: the depth's error grows with the depth, and
+    /// found depths lie shallow of the truth more often than deep (README, *Blind spots*), so its
+    /// spread on a log scale (the depth within `d · e^(±sd)`) says more than a symmetric one.
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
-        position_params(fit.pos)
+        let mut p = position_params(fit.pos);
+        p.push(("ln_depth_km", fit.pos[2].max(MIN_DEPTH_KM).ln()));
+        p
     }
     fn resample(
         &self,

@@ -395,21 +395,9 @@ pub fn rejection(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
 /// The coordinates' names in [`on_bound`]'s rejections.
 const COORDINATES: [&str; 3] = ["x", "y", "depth"];
 
-/// The smallest depth (km) whose logarithm a key parameter takes (a fit without a position has
-/// depth 0; every grid depth is larger).
-const MIN_DEPTH_KM: f64 = 1e-3;
-
-/// A source's key parameters (what the bootstrap measures): its position, and its depth's
-/// natural logarithm. The depth's error grows with the depth (found lasting sources lie shallow
-/// of the truth more often than deep: README, *Blind spots*), so its spread on a log scale —
-/// the depth within `d · e^(±sd)`, wider below than above — says more than a symmetric one.
+/// A source's key parameters (what the bootstrap measures): its position.
 pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
-    vec![
-        ("x_km", pos[0]),
-        ("y_km", pos[1]),
-        ("depth_km", pos[2]),
-        ("ln_depth_km", pos[2].max(MIN_DEPTH_KM).ln()),
-    ]
+    vec![("x_km", pos[0]), ("y_km", pos[1]), ("depth_km", pos[2])]
 }
 
 /// The bootstrap draw of a source at `pos`: the source and the translations kept, the rest
