@@ -29,8 +29,8 @@
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid_at, on_bound, pattern, position_params, refine, resample_at,
-    translations, unresolvable, with_translations,
+    declare_at, distinct_best, grid_at, located_draw, on_bound, pattern, position_params, refine,
+    resample_at, translations, unresolvable, with_translations,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
@@ -365,10 +365,7 @@ fn resample_change(res: &GnssResiduals, fit: &LastingFit, rng: &mut StdRng) -> G
         row.iter_mut().zip(q).for_each(|(k, qc)| *k -= off * qc);
     }
     let drawn = loc.with_fit(latent::coherent_draw_keeping(&loc.fit.r, nc, &kept, rng));
-    match res.held {
-        Some(_) => res.with_held(drawn),
-        None => drawn,
-    }
+    located_draw(res, drawn)
 }
 
 impl Family<GnssResiduals> for LastingSource {

@@ -420,15 +420,19 @@ pub fn resample_coherent(
 /// The rows of [`resample_coherent`]'s draw from the rows `r`.
 fn coherent_draw(r: &[f64], nc: usize, patterns: &[Vec<f64>], rng: &mut StdRng) -> Vec<f64> {
     let (effect, noise) = split_effect(r, nc, patterns);
-    let noise = PhaseSurrogates::new(&noise, nc).draw(rng);
-    noise.iter().zip(&effect).map(|(n, e)| n + e).collect()
+    kept_plus_drawn(&effect, &noise, nc, rng)
 }
 
 /// A draw of the rows `r` that keeps the rows `kept` (an effect as modelled) and phase-randomises
 /// the rest as [`resample_coherent`] does: `kept + draw(r − kept)`.
 pub fn coherent_draw_keeping(r: &[f64], nc: usize, kept: &[f64], rng: &mut StdRng) -> Vec<f64> {
     let noise: Vec<f64> = r.iter().zip(kept).map(|(a, k)| a - k).collect();
-    let noise = PhaseSurrogates::new(&noise, nc).draw(rng);
+    kept_plus_drawn(kept, &noise, nc, rng)
+}
+
+/// `kept` plus a phase surrogate of `noise` with one phase per frequency shared by every channel.
+fn kept_plus_drawn(kept: &[f64], noise: &[f64], nc: usize, rng: &mut StdRng) -> Vec<f64> {
+    let noise = PhaseSurrogates::new(noise, nc).draw(rng);
     noise.iter().zip(kept).map(|(n, k)| n + k).collect()
 }
 

@@ -409,7 +409,15 @@ pub(super) fn position_params(pos: [f64; 3]) -> Vec<(&'static str, f64)> {
 /// moves, and the spread would come out too small.
 pub(super) fn resample_at(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
     let loc = res.locating();
-    let drawn = latent::resample_coherent(loc, &with_translations(loc, pos), rng);
+    located_draw(
+        res,
+        latent::resample_coherent(loc, &with_translations(loc, pos), rng),
+    )
+}
+
+/// A draw made where a source is located ([`GnssResiduals::locating`]) as residuals like `res`:
+/// projected back when `res` holds a held view ([`GnssResiduals::with_held`]), else as drawn.
+pub(super) fn located_draw(res: &GnssResiduals, drawn: GnssResiduals) -> GnssResiduals {
     match res.held {
         Some(_) => res.with_held(drawn),
         None => drawn,
