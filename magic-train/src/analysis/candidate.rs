@@ -66,6 +66,9 @@ pub struct ParamSd {
     pub value: f64,
     /// Its standard deviation.
     pub sd: f64,
+    /// The bootstrap draws' mean: `draws_mean − value` is the shift of the estimator that the
+    /// bootstrap sees (its estimate of the estimator's bias around `value`).
+    pub draws_mean: f64,
 }
 
 /// Standard deviations above the surrogates' mean (square-root scale) a detection statistic

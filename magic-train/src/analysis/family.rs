@@ -171,7 +171,7 @@ fn carries(vetoes: bool, c: &Candidate) -> bool {
 
 /// The parametric bootstrap of a fit's key parameters: `opts.bootstrap` residual sets holding the
 /// fitted effect plus fresh noise ([`Family::resample`]), each refitted; the standard deviation
-/// of each key parameter over the draws.
+/// and the mean of each key parameter over the draws.
 fn bootstrap<R: Sync, F: Family<R>>(
     family: &F,
     res: &R,
@@ -202,10 +202,12 @@ fn bootstrap<R: Sync, F: Family<R>>(
         .enumerate()
         .map(|(k, (name, value))| {
             let v: Vec<f64> = draws.iter().filter_map(|d| d.get(k).map(|x| x.1)).collect();
+            let (draws_mean, sd) = crate::numerics::mean_std(&v);
             ParamSd {
                 name: name.to_string(),
                 value: *value,
-                sd: crate::numerics::sd(&v),
+                sd,
+                draws_mean,
             }
         })
         .collect())

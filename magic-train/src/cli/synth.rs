@@ -177,7 +177,7 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
     table.push_str(&miss_table(&rows));
     if !coverage.is_empty() {
         table.push_str(
-            "\nBootstrap standard deviations against the truth (significant candidates):\n\n",
+            "\nBootstrap standard deviations against the truth, and the shift its draws see beside the mean error (significant candidates):\n\n",
         );
         table.push_str(&coverage.table());
     }

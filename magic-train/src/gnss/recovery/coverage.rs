@@ -1,7 +1,10 @@
 //! Calibration of the bootstrap standard deviations on synthetic data: for every significant
 //! candidate of an injected family that carries an uncertainty, the share of its key parameters
 //! whose true value lies within ±1 and ±2 standard deviations (about 68 % and 95 % if the sds tell
-//! the truth). A step counts only at the right station (another station's offsets say nothing).
+//! the truth); and beside them the estimates' mean error against the shift the bootstrap sees
+//! (its draws' mean less the estimate): a bias the draws reproduce shows in both, one they miss
+//! only in the first. A step counts only at the right station (another station's offsets say
+//! nothing).
 
 use crate::analysis::Analysis;
 use crate::data::dataset::day_number;
@@ -10,10 +13,23 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-/// Counts per (family, parameter, noise model): draws, within ±1 sd, within ±2 sd.
+/// What is counted per (family, parameter, noise model).
+#[derive(Clone, Copy, Debug, Default)]
+struct Row {
+    /// Estimates with a standard deviation.
+    n: usize,
+    /// Those within ±1 and ±2 sd of the truth.
+    within: [usize; 2],
+    /// Sum of the estimates' errors (estimate − truth).
+    error: f64,
+    /// Sum of the bootstrap's shifts (draws' mean − estimate).
+    shift: f64,
+}
+
+/// Counts per (family, parameter, noise model).
 #[derive(Clone, Debug, Default)]
 pub struct Coverage {
-    rows: BTreeMap<(String, String, String), [usize; 3]>,
+    rows: BTreeMap<(String, String, String), Row>,
 }
 
 /// The true value of a key parameter (as the families name them) from the injected parameters.
@@ -54,6 +70,15 @@ pub fn truth_value(param: &str, truth: &Value) -> Option<f64> {
     truth.get(param)?.as_f64()
 }
 
+/// `v` with three significant digits (`0` for zero; no exponent).
+fn significant3(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.decimals$}")
+}
+
 impl Coverage {
     /// Adds the analysis of one synthetic dataset (its injected effects, its noise model).
     pub fn add(&mut self, analysis: &Analysis, injected: &[Injected], noise: &str) {
@@ -78,25 +103,33 @@ impl Coverage {
                 let z = (p.value - truth).abs() / p.sd;
                 let key = (inj.family.clone(), p.name.clone(), noise.to_string());
                 let row = self.rows.entry(key).or_default();
-                row[0] += 1;
-                row[1] += usize::from(z <= 1.0);
-                row[2] += usize::from(z <= 2.0);
+                row.n += 1;
+                row.within[0] += usize::from(z <= 1.0);
+                row.within[1] += usize::from(z <= 2.0);
+                row.error += p.value - truth;
+                row.shift += p.draws_mean - p.value;
             }
         }
     }
 
-    /// The Markdown table: family, parameter, noise model, draws, shares within ±1 and ±2 sd.
+    /// The Markdown table: family, parameter, noise model, estimates, shares within ±1 and
+    /// ±2 sd, the estimates' mean error and the bootstrap's mean shift (three significant
+    /// digits, in the parameter's units).
     pub fn table(&self) -> String {
         let mut s = String::from(
-            "| family | parameter | noise | n | within ±1 sd | within ±2 sd |\n|---|---|---|---|---|---|\n",
+            "| family | parameter | noise | n | within ±1 sd | within ±2 sd | mean error | bootstrap's mean shift |\n|---|---|---|---|---|---|---|---|\n",
         );
-        for ((family, param, noise), [n, one, two]) in &self.rows {
-            let pct = |k: usize| 100.0 * k as f64 / (*n).max(1) as f64;
+        for ((family, param, noise), r) in &self.rows {
+            let n = r.n.max(1) as f64;
+            let pct = |k: usize| 100.0 * k as f64 / n;
             let _ = writeln!(
                 s,
-                "| {family} | {param} | {noise} | {n} | {:.0} % | {:.0} % |",
-                pct(*one),
-                pct(*two)
+                "| {family} | {param} | {noise} | {} | {:.0} % | {:.0} % | {} | {} |",
+                r.n,
+                pct(r.within[0]),
+                pct(r.within[1]),
+                significant3(r.error / n),
+                significant3(r.shift / n)
             );
         }
         s
@@ -115,6 +148,10 @@ mod tests {
     use serde_json::json;
 
     fn analysis(station: &str, value: f64, sd: f64) -> Analysis {
+        analysis_drawn(station, value, sd, value)
+    }
+
+    fn analysis_drawn(station: &str, value: f64, sd: f64, draws_mean: f64) -> Analysis {
         let mut c = Candidate::from_scores(
             "step",
             0.5,
@@ -127,6 +164,7 @@ mod tests {
             name: "offset_u_mm".into(),
             value,
             sd,
+            draws_mean,
         }];
         Analysis {
             problem: "mogi",
@@ -151,8 +189,34 @@ mod tests {
         c.add(&analysis("AV06", 10.0, 1.0), &truth, "paper"); // wrong station: not counted
         let t = c.table();
         assert!(
-            t.contains("| step | offset_u_mm | paper | 3 | 33 % | 67 % |"),
+            t.contains("| step | offset_u_mm | paper | 3 | 33 % | 67 % | 1.67 | 0 |"),
             "{t}"
         );
+    }
+
+    #[test]
+    fn sets_the_mean_error_beside_the_shift_the_bootstrap_sees() {
+        let truth = [Injected::new(
+            "step",
+            json!({"station": "AV13", "offset_mm": [0.0, 0.0, 10.0]}),
+        )];
+        let mut c = Coverage::default();
+        // Estimates 0.5 and 0.7 low; draws 0.1 and 0.3 below them.
+        c.add(&analysis_drawn("AV13", 9.5, 1.0, 9.4), &truth, "red");
+        c.add(&analysis_drawn("AV13", 9.3, 1.0, 9.0), &truth, "red");
+        let t = c.table();
+        assert!(
+            t.contains("| step | offset_u_mm | red | 2 | 100 % | 100 % | -0.600 | -0.200 |"),
+            "{t}"
+        );
+    }
+
+    #[test]
+    fn rounds_to_three_significant_digits() {
+        assert_eq!(significant3(-0.6), "-0.600");
+        assert_eq!(significant3(12.345), "12.3");
+        assert_eq!(significant3(1234.4), "1234");
+        assert_eq!(significant3(0.001234), "0.00123");
+        assert_eq!(significant3(0.0), "0");
     }
 }
