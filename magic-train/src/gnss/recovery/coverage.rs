@@ -176,12 +176,17 @@ mod tests {
         }
     }
 
-    #[test]
-    fn counts_within_one_and_two_sd_at_the_right_station_only() {
-        let truth = [Injected::new(
+    /// A 10 mm vertical step at AV13, as the truth lists it.
+    fn step_at_av13() -> [Injected; 1] {
+        [Injected::new(
             "step",
             json!({"station": "AV13", "offset_mm": [0.0, 0.0, 10.0]}),
-        )];
+        )]
+    }
+
+    #[test]
+    fn counts_within_one_and_two_sd_at_the_right_station_only() {
+        let truth = step_at_av13();
         let mut c = Coverage::default();
         c.add(&analysis("AV13", 10.5, 1.0), &truth, "paper"); // within 1
         c.add(&analysis("AV13", 11.5, 1.0), &truth, "paper"); // within 2
@@ -196,10 +201,7 @@ mod tests {
 
     #[test]
     fn sets_the_mean_error_beside_the_shift_the_bootstrap_sees() {
-        let truth = [Injected::new(
-            "step",
-            json!({"station": "AV13", "offset_mm": [0.0, 0.0, 10.0]}),
-        )];
+        let truth = step_at_av13();
         let mut c = Coverage::default();
         // Estimates 0.5 and 0.7 low; draws 0.1 and 0.3 below them.
         c.add(&analysis_drawn("AV13", 9.5, 1.0, 9.4), &truth, "red");
