@@ -2,7 +2,9 @@
 //! (else on a built-in synthetic record of the same network holding an effect nobody declared),
 //! it runs the loop — trains B and C, traces B's residual to the effect F lacks, adds it as
 //! physics, retrains, and prints what it found with the error before and after — then exports
-//! the final C to int8 and runs the test days through the firmware under QEMU.
+//! the final C to int8 and runs the test days through the firmware under QEMU. Where QEMU or the
+//! firmware's Rust target is missing, it says so before the loop and does everything else (a
+//! fresh machine still runs the main job; `scripts/test-all.sh` installs both).
 
 use crate::analysis::AnalysisOptions;
 use crate::closed_loop::{self, LoopOptions, LoopReport};
@@ -94,6 +96,16 @@ pub fn run(
     qemu: bool,
 ) -> Result<()> {
     let p = data(data_dir, seed)?;
+    // Said before minutes of training, not after them.
+    let firmware = if qemu {
+        crate::firmware::qemu::ensure_toolchain().map_err(|e| {
+            let why = format!("{e:#}");
+            eprintln!("note: the firmware step will be skipped: {why} (`--no-qemu` skips it without this note)");
+            why
+        })
+    } else {
+        Err("--no-qemu".to_string())
+    };
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let d = &p.data;
     eprintln!(
@@ -153,8 +165,14 @@ pub fn run(
         "int8": {"round": k, "test_mse": eq[2].mse, "f32_test_mse": ef[2].mse, "max_param_diff": quant_diff},
         "plausibility": {"peak_dv": peak, "peak_depth": depth, "plausible_share": share},
     });
-    if qemu {
-        summary["firmware"] = crate::firmware::run_test_days(&qpath, &qm, &rows, &q_lines)?;
+    match &firmware {
+        Ok(()) => {
+            summary["firmware"] = crate::firmware::run_test_days(&qpath, &qm, &rows, &q_lines)?;
+        }
+        Err(why) => {
+            println!("firmware: not run ({why})");
+            summary["firmware"] = json!({ "skipped": why });
+        }
     }
     std::fs::write(
         out.join("summary.json"),
