@@ -11,8 +11,9 @@
 //! **Located and scored on held-out stations, on the held view.** Candidates are the grid
 //! points (the second source's grid reaching shallower, [`LASTING_DEPTHS`]) whose pattern the
 //! network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days after less mean
-//! over those before, every [`SCAN_SPACING`] days, counting products of different stations only
-//! — and the best point at each of the few epochs where its change would gain most on held-out
+//! over those before, every [`SCAN_SPACING`] days to [`SCAN_EDGE_DAYS`] from the record's ends
+//! (shorter windows there, at equal noise), counting products of different stations only — and
+//! the best point at each of the few epochs where its change would gain most on held-out
 //! stations, so that one change cannot hide another at a different time (ranked by the offsets,
 //! the main source's own episodes took every place). Each is refined at its epoch by that gain,
 //! predicting every station from the others (`lasting_gain`), the score it is judged by:
@@ -50,6 +51,9 @@ const CANDIDATES: usize = 3;
 pub const SCAN_DAYS: usize = 180;
 /// Days between the scanned epochs.
 pub const SCAN_SPACING: usize = 30;
+/// Days from either end of the record to the first and last scanned epochs (a multiple of
+/// [`SCAN_SPACING`], so that the epochs with full windows stay where they were).
+pub const SCAN_EDGE_DAYS: usize = 2 * SCAN_SPACING;
 /// Depths (km) of the search grid: the second source's
 /// [`GRID_DEPTHS`](super::second_source::GRID_DEPTHS) and two shallower, so that a deflation
 /// 2–3 km deep is not held on a bound at 2 km. The second source keeps its grid: under `red`
@@ -86,17 +90,25 @@ pub struct LastingFit {
     pub stat: f64,
 }
 
-/// The network's offsets: at each scanned epoch (row `SCAN_DAYS + k · SCAN_SPACING`), every
-/// channel's mean over the [`SCAN_DAYS`] rows after less its mean over those before.
+/// The network's offsets: at each scanned epoch (every [`SCAN_SPACING`]-th row from
+/// [`SCAN_EDGE_DAYS`] to the record's end less as many), every channel's mean over the
+/// [`SCAN_DAYS`] rows after less its mean over those before — near the record's ends over the
+/// rows there are, scaled so that white noise weighs alike at every epoch (a change in the last
+/// months is what an observatory most wants to see, and a full window would not reach it).
 fn offsets(r: &[f64], nc: usize) -> Vec<(usize, Vec<f64>)> {
     let t_n = r.len() / nc.max(1);
     let w = SCAN_DAYS;
     let pre = Prefix::new(r, nc);
-    (w..(t_n + 1).saturating_sub(w))
+    (SCAN_EDGE_DAYS..(t_n + 1).saturating_sub(SCAN_EDGE_DAYS))
         .step_by(SCAN_SPACING)
         .map(|t| {
+            let (wb, wa) = (w.min(t), w.min(t_n - t));
+            // White noise's variance of the difference is σ²(1/wa + 1/wb): 2σ²/w in full.
+            let s = ((2.0 / w as f64) / (1.0 / wa as f64 + 1.0 / wb as f64)).sqrt();
             let d = (0..nc)
-                .map(|c| (pre.sum(c, t, t + w) - pre.sum(c, t - w, t)) / w as f64)
+                .map(|c| {
+                    s * (pre.sum(c, t, t + wa) / wa as f64 - pre.sum(c, t - wb, t) / wb as f64)
+                })
                 .collect();
             (t, d)
         })
@@ -499,20 +511,39 @@ mod tests {
 
     #[test]
     fn offsets_measure_a_step_at_a_scanned_epoch() {
-        // Two channels over 1 000 days: a step of 2 at day 390 (a scanned epoch: 180 + 7 · 30),
-        // and a constant.
+        // Two channels over 1 000 days: a step of 2 at day 390 (a scanned epoch: 60 + 11 · 30,
+        // full windows on both sides), and a constant.
         let nc = 2;
         let r: Vec<f64> = (0..1000)
             .flat_map(|t| [if t >= 390 { 2.0 } else { 0.0 }, 5.0])
             .collect();
         let d = offsets(&r, nc);
-        assert_eq!(d.len(), (1000 - 2 * SCAN_DAYS) / SCAN_SPACING + 1);
-        assert_eq!(d[7].0, 390);
-        assert!((d[7].1[0] - 2.0).abs() < 1e-12 && d[7].1[1].abs() < 1e-12);
+        assert_eq!(d.len(), (1000 - 2 * SCAN_EDGE_DAYS) / SCAN_SPACING + 1);
+        assert_eq!((d[0].0, d[11].0), (SCAN_EDGE_DAYS, 390));
+        assert!((d[11].1[0] - 2.0).abs() < 1e-12 && d[11].1[1].abs() < 1e-12);
         for (t, de) in &d {
             assert!(de[0] <= 2.0 + 1e-12, "epoch {t}");
             assert!(de[1].abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn offsets_reach_the_records_last_months_at_equal_noise() {
+        // A step of 2 at day 930 of 1 000: 70 days after it, 180 before. The offset is the
+        // step scaled by √((2/180) / (1/70 + 1/180)), the ratio of white noise's standard
+        // deviation with full windows to its deviation with these.
+        let r: Vec<f64> = (0..1000)
+            .map(|t| if t >= 930 { 2.0 } else { 0.0 })
+            .collect();
+        let d = offsets(&r, 1);
+        let (t, last) = d.last().unwrap();
+        assert_eq!(*t, 930);
+        let s = ((2.0_f64 / 180.0) / (1.0 / 70.0 + 1.0 / 180.0)).sqrt();
+        assert!((last[0] - 2.0 * s).abs() < 1e-12, "{}", last[0]);
+        // Every epoch at least SCAN_EDGE_DAYS from either end.
+        assert!(d
+            .iter()
+            .all(|(t, _)| *t >= SCAN_EDGE_DAYS && 1000 - t >= SCAN_EDGE_DAYS));
     }
 
     #[test]
