@@ -192,20 +192,22 @@ fn bounding_box(pts: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
         })
 }
 
-/// Local pattern search of a position maximising `score`, from `best`, inside the grid's box
-/// and outside the main source's neighbourhood.
+/// Local pattern search of a position maximising `score`, from `best`, inside the grid's box,
+/// outside the main source's neighbourhood and where `admissible` holds.
 pub(super) fn refine(
     res: &GnssResiduals,
     pts: &[[f64; 3]],
     mut best: [f64; 3],
     mut bg: f64,
     score: &dyn Fn(&[f64]) -> f64,
+    admissible: &dyn Fn([f64; 3]) -> bool,
 ) -> ([f64; 3], f64) {
     let (lo, hi) = bounding_box(pts);
     let main = res.ctx.main_source;
     let allowed = |p: &[f64; 3]| {
         (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k])
             && (p[0] - main[0]).hypot(p[1] - main[1]) >= MAIN_SOURCE_EXCLUSION_KM
+            && admissible(*p)
     };
     let mut step = 0.5;
     while step >= 0.1 {
@@ -288,7 +290,14 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             .map(|(pi, g)| (latent::persistent_along(g, x), pi))
             .collect();
         for (q0, pi) in distinct_best(scored, pts, k) {
-            let (pos, _) = refine(res, pts, pts[pi], q0, &|g| latent::persistent_along(g, x));
+            let (pos, _) = refine(
+                res,
+                pts,
+                pts[pi],
+                q0,
+                &|g| latent::persistent_along(g, x),
+                &|_| true,
+            );
             if once {
                 if tried
                     .iter()

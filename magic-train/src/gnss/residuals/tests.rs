@@ -146,6 +146,70 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
     }
 }
 
+/// The lasting source is searched only where its field is not mostly a move of the main
+/// source: a change that stays, at a point beside the main source that such a move mimics, is
+/// located at a resolvable point (and so not rejected as a move), never at its own.
+#[test]
+fn the_lasting_source_is_searched_where_a_move_cannot_mimic_it() {
+    use crate::analysis::{Family, Rejection};
+    use crate::gnss::families::lasting_source::LastingSource;
+    use crate::gnss::families::second_source::{resolvable, MIN_RESOLVABLE};
+    use magic_core::mogi::{field, field_jacobian, N_PARAMS};
+    let network = Network::akutan();
+    let (ns, nc) = (network.len(), 3 * network.len());
+    let main = crate::gnss::synth::SOURCE;
+    let scale: Vec<f64> = (0..nc).map(|c| [1.2, 1.2, 3.5][c / ns]).collect();
+    let (mut out, mut jac) = (vec![0.0; nc], vec![[0.0; N_PARAMS]; nc]);
+    field_jacobian(
+        &network.stations,
+        &[main[0], main[1], main[2], 1.0],
+        &mut out,
+        &mut jac,
+    )
+    .unwrap();
+    let columns: Vec<(Vec<f64>, f64)> = (0..N_PARAMS)
+        .map(|j| scaled((0..nc).map(|c| jac[c][j] / scale[c]).collect()))
+        .collect();
+    // A deflation beside the main source, at its depth, from day 500 of 1 000 on; a little
+    // white noise.
+    let beside = [main[0], main[1] + 3.0, main[2]];
+    let mut u = vec![0.0; nc];
+    field(
+        &network.stations,
+        &[beside[0], beside[1], beside[2], -1.0],
+        &mut u,
+    )
+    .unwrap();
+    let mut rng = StdRng::seed_from_u64(3);
+    let rows: Vec<Vec<f64>> = (0..1000)
+        .map(|t| {
+            let on = if t >= 500 { 1.0 } else { 0.0 };
+            (0..nc)
+                .map(|c| on * u[c] / scale[c] + 0.01 * draw::normal(&mut rng))
+                .collect()
+        })
+        .collect();
+    let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+    let shared = Shared {
+        main: [main[0], main[1], main[2]],
+        source_span: orthonormal(&columns, 1e-9, 2),
+        ..plain(&network, &scale, &days)
+    };
+    let res = view(&shared, &rows, Vec::new());
+    assert!(resolvable(&res, beside) < MIN_RESOLVABLE);
+    let fit = LastingSource.fit(&res).unwrap();
+    assert!(
+        resolvable(&res, fit.pos) >= MIN_RESOLVABLE,
+        "located at {:?}",
+        fit.pos
+    );
+    let why = LastingSource.reject(&res, &fit);
+    assert!(
+        !matches!(why, Some(Rejection::Unresolvable { .. })),
+        "{why:?}"
+    );
+}
+
 /// The free residuals are the held ones projected off the rest of the main source's span
 /// (the held direction lies within it); a draw of the free residuals given back the held
 /// view's part beyond them ([`GnssResiduals::beside_moves`]) keeps that part as the data
