@@ -67,12 +67,9 @@ fn the_held_source_is_the_field_of_a_source_that_stays_put() {
     assert!(held_source(&with_up, &translations, &rows).is_none());
 }
 
-/// A source's resolvable share (`second_source::resolvable`): none at the main source itself
-/// (its field is the volume's direction), little beside it at its depth, most far from it —
-/// and, channels weighted as the synthetic generator weighs them, the generator's own measure.
-#[test]
-fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
-    use crate::gnss::families::second_source::{rejection, resolvable};
+/// The Akutan network with the synthetic main source: the network, each channel's scale (as the
+/// generator weighs them), the main source's position and its span (standardised units).
+fn akutan_main_source() -> (Network, Vec<f64>, [f64; 3], Vec<Vec<f64>>) {
     use magic_core::mogi::{field_jacobian, N_PARAMS};
     let network = Network::akutan();
     let (ns, nc) = (network.len(), 3 * network.len());
@@ -89,14 +86,37 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
     let columns: Vec<(Vec<f64>, f64)> = (0..N_PARAMS)
         .map(|j| scaled((0..nc).map(|c| jac[c][j] / scale[c]).collect()))
         .collect();
-    let rows = vec![vec![0.0; nc]; 10];
+    let span = orthonormal(&columns, 1e-9, 2);
+    (network, scale, [main[0], main[1], main[2]], span)
+}
+
+/// Residuals `rows` (one per day) on the network with its main source at `main` and its span.
+fn beside_main_source(
+    network: &Network,
+    scale: &[f64],
+    main: [f64; 3],
+    span: Vec<Vec<f64>>,
+    rows: &[Vec<f64>],
+) -> GnssResiduals {
     let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
     let shared = Shared {
-        main: [main[0], main[1], main[2]],
-        source_span: orthonormal(&columns, 1e-9, 2),
-        ..plain(&network, &scale, &days)
+        main,
+        source_span: span,
+        ..plain(network, scale, &days)
     };
-    let res = view(&shared, &rows, Vec::new());
+    view(&shared, rows, Vec::new())
+}
+
+/// A source's resolvable share (`second_source::resolvable`): none at the main source itself
+/// (its field is the volume's direction), little beside it at its depth, most far from it —
+/// and, channels weighted as the synthetic generator weighs them, the generator's own measure.
+#[test]
+fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
+    use crate::gnss::families::second_source::{rejection, resolvable};
+    let (network, scale, main, span) = akutan_main_source();
+    let nc = scale.len();
+    let rows = vec![vec![0.0; nc]; 10];
+    let res = beside_main_source(&network, &scale, main, span, &rows);
     let at = |p: [f64; 3]| resolvable(&res, p);
     assert!(at([main[0], main[1], main[2]]) < 1e-6);
     assert!(at([main[0], main[1] + 3.0, main[2]]) < 0.25);
@@ -154,22 +174,9 @@ fn the_lasting_source_is_searched_where_a_move_cannot_mimic_it() {
     use crate::analysis::{Family, Rejection};
     use crate::gnss::families::lasting_source::LastingSource;
     use crate::gnss::families::second_source::{resolvable, MIN_RESOLVABLE};
-    use magic_core::mogi::{field, field_jacobian, N_PARAMS};
-    let network = Network::akutan();
-    let (ns, nc) = (network.len(), 3 * network.len());
-    let main = crate::gnss::synth::SOURCE;
-    let scale: Vec<f64> = (0..nc).map(|c| [1.2, 1.2, 3.5][c / ns]).collect();
-    let (mut out, mut jac) = (vec![0.0; nc], vec![[0.0; N_PARAMS]; nc]);
-    field_jacobian(
-        &network.stations,
-        &[main[0], main[1], main[2], 1.0],
-        &mut out,
-        &mut jac,
-    )
-    .unwrap();
-    let columns: Vec<(Vec<f64>, f64)> = (0..N_PARAMS)
-        .map(|j| scaled((0..nc).map(|c| jac[c][j] / scale[c]).collect()))
-        .collect();
+    use magic_core::mogi::field;
+    let (network, scale, main, span) = akutan_main_source();
+    let nc = scale.len();
     // A deflation beside the main source, at its depth, from day 500 of 1 000 on; a little
     // white noise.
     let beside = [main[0], main[1] + 3.0, main[2]];
@@ -189,13 +196,7 @@ fn the_lasting_source_is_searched_where_a_move_cannot_mimic_it() {
                 .collect()
         })
         .collect();
-    let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
-    let shared = Shared {
-        main: [main[0], main[1], main[2]],
-        source_span: orthonormal(&columns, 1e-9, 2),
-        ..plain(&network, &scale, &days)
-    };
-    let res = view(&shared, &rows, Vec::new());
+    let res = beside_main_source(&network, &scale, main, span, &rows);
     assert!(resolvable(&res, beside) < MIN_RESOLVABLE);
     let fit = LastingSource.fit(&res).unwrap();
     assert!(
