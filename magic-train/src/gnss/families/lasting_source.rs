@@ -22,9 +22,9 @@
 //! near the main one keeps its field, with the second source's rules: rejected on the grid's
 //! bound, or when its field is mostly a move of the main source (trial seeds 101–105, against
 //! refined by the offsets and scored on the free view: 36 → 45 of 60 lasting deflations found).
-//! The second rule bounds the search itself: a near source located deep of the truth, where a
-//! move explains more of its field, fits nearly as well at the resolvable point beside it, so
-//! no position a move mimics is searched (trial seeds 101–110: 101 → 102 of 120 found).
+//! A candidate refined to where a move mimics it (a near source located deep of the truth,
+//! where a move explains more of its field) is refined again within the resolvable region,
+//! from its nearest grid point there: the resolvable point beside it fits nearly as well.
 //! The network translations are a nuisance in the gain and are removed before the surrogates
 //! randomise each station's series, as for the second source. The scan's value at the fit is
 //! the family's detection statistic: standing out of the surrogates', it makes a score merely
@@ -195,6 +195,19 @@ fn argmax(v: impl Iterator<Item = (f64, usize)>) -> (f64, usize) {
     v.fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
 }
 
+/// The grid point of `pts` nearest `pos` (in 3-D) where `admissible` holds, if any.
+fn nearest(
+    pts: &[[f64; 3]],
+    pos: [f64; 3],
+    admissible: &dyn Fn([f64; 3]) -> bool,
+) -> Option<[f64; 3]> {
+    let d2 = |p: &[f64; 3]| (0..3).map(|k| (p[k] - pos[k]).powi(2)).sum::<f64>();
+    pts.iter()
+        .filter(|p| admissible(**p))
+        .min_by(|a, b| d2(a).total_cmp(&d2(b)))
+        .copied()
+}
+
 /// The candidates of a table of the statistic (`table[point][epoch]`, grid points `pts`) as
 /// `(statistic, point, epoch)`: the [`CANDIDATES`] best distinct points, each at its best
 /// epoch; then, per epoch, the point where the statistic is largest, and of these the
@@ -262,38 +275,31 @@ fn search(res: &GnssResiduals) -> LastingFit {
     if d.is_empty() || pts.is_empty() {
         return LastingFit::default();
     }
-    // Only where the field is not mostly a move of the main source: located deep of the truth
-    // (as the scan places near sources), a source is pushed out of that region and rejected,
-    // although a resolvable point beside it fits nearly as well.
-    let admissible = |p: [f64; 3]| resolvable(loc, p) >= MIN_RESOLVABLE;
-    // Per grid point, the statistic at every scanned epoch (−∞ at points not admissible).
+    // Per grid point, the statistic at every scanned epoch.
     let table: Vec<Vec<f64>> = patterns
         .par_iter()
-        .zip(pts.par_iter())
-        .map(|(g, p)| {
-            if admissible(*p) {
-                d.iter().map(|(_, de)| shared_offset(g, de, ns)).collect()
-            } else {
-                vec![f64::NEG_INFINITY; d.len()]
-            }
-        })
+        .map(|g| d.iter().map(|(_, de)| shared_offset(g, de, ns)).collect())
         .collect();
     let ts = translations(loc);
     let pre = Prefix::new(&loc.fit.r, loc.nc());
     let gain_of = |g: &[f64], onset: usize| lasting_gain(g, &ts, &pre, ns, onset);
     let gain = |pos: [f64; 3], onset: usize| gain_of(&pattern(loc, pos), onset);
+    // Where the field is not mostly a move of the main source.
+    let admissible = |p: [f64; 3]| resolvable(loc, p) >= MIN_RESOLVABLE;
     let mut best: Option<LastingFit> = None;
     for (_, pi, k) in candidates(&table, pts, |pi, k| gain(pts[pi], d[k].0)) {
         let (onset, de) = &d[k];
+        let score_at = |g: &[f64]| gain_of(g, *onset);
         let start = gain(pts[pi], *onset);
-        let (pos, score) = refine(
-            loc,
-            pts,
-            pts[pi],
-            start,
-            &|g| gain_of(g, *onset),
-            &admissible,
-        );
+        let (mut pos, mut score) = refine(loc, pts, pts[pi], start, &score_at, &|_| true);
+        // Refined to where a move mimics it (as a near source located deep of the truth is),
+        // refined again from the nearest admissible grid point, within that region: the
+        // resolvable point beside it fits nearly as well.
+        if !admissible(pos) {
+            if let Some(q) = nearest(pts, pos, &admissible) {
+                (pos, score) = refine(loc, pts, q, gain(q, *onset), &score_at, &admissible);
+            }
+        }
         let stat = shared_offset(&pattern(loc, pos), de, ns);
         // (The first candidate stands even without a gain: its position is still reported.)
         if best.is_none_or(|b| score > b.score) {
