@@ -57,6 +57,9 @@ pub const SCAN_SPACING: usize = 30;
 /// Days from either end of the record to the first and last scanned epochs (a multiple of
 /// [`SCAN_SPACING`], so that the epochs with full windows stay where they were).
 pub const SCAN_EDGE_DAYS: usize = 2 * SCAN_SPACING;
+// The epochs' spacing divides the windows and the edge: `candidates` counts epochs apart by it.
+const _: () =
+    assert!(SCAN_DAYS.is_multiple_of(SCAN_SPACING) && SCAN_EDGE_DAYS.is_multiple_of(SCAN_SPACING));
 /// Depths (km) of the search grid: the second source's
 /// [`GRID_DEPTHS`](super::second_source::GRID_DEPTHS) and two shallower, so that a deflation
 /// 2–3 km deep is not held on a bound at 2 km. The second source keeps its grid: under `red`
