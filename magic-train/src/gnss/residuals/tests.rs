@@ -166,11 +166,12 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
     }
 }
 
-/// The lasting source is searched only where its field is not mostly a move of the main
+/// The lasting source is located only where its field is not mostly a move of the main
 /// source: a change that stays, at a point beside the main source that such a move mimics, is
-/// located at a resolvable point (and so not rejected as a move), never at its own.
+/// located at a resolvable point (refined again within that region, and so not rejected as a
+/// move), never at its own.
 #[test]
-fn the_lasting_source_is_searched_where_a_move_cannot_mimic_it() {
+fn the_lasting_source_is_located_where_a_move_cannot_mimic_it() {
     use crate::analysis::{Family, Rejection};
     use crate::gnss::families::lasting_source::LastingSource;
     use crate::gnss::families::second_source::{resolvable, MIN_RESOLVABLE};
