@@ -508,6 +508,30 @@ mod tests {
         assert_eq!(LASTING_DEPTHS[2..], GRID_DEPTHS);
     }
 
+    /// The second refinement starts from the admissible grid point nearest in 3-D (depth
+    /// counts like distance), and from none when no point is admissible.
+    #[test]
+    fn the_nearest_admissible_grid_point_is_where_the_refit_starts() {
+        let pts = [
+            [0.0, 0.0, 3.0],
+            [1.0, 0.0, 3.0],
+            [0.0, 0.0, 5.0],
+            [3.0, 0.0, 3.0],
+        ];
+        let shallow_far = |p: [f64; 3]| p[0] >= 1.0;
+        assert_eq!(
+            nearest(&pts, [0.2, 0.0, 3.1], &shallow_far),
+            Some([1.0, 0.0, 3.0])
+        );
+        let deep_or_far = |p: [f64; 3]| p[2] > 4.0 || p[0] > 2.0;
+        // 1.9 km to the deep point, 2.8 km to the far one.
+        assert_eq!(
+            nearest(&pts, [0.2, 0.0, 3.1], &deep_or_far),
+            Some([0.0, 0.0, 5.0])
+        );
+        assert_eq!(nearest(&pts, [0.2, 0.0, 3.1], &|_| false), None);
+    }
+
     #[test]
     fn a_change_is_modelled_as_its_means_and_a_ramp_between() {
         // 600 days: 1 until day 200, a straight ramp to −3 by day 300, −3 after; onset at 250.
