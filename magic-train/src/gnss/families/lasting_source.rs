@@ -203,17 +203,18 @@ fn argmax(v: impl Iterator<Item = (f64, usize)>) -> (f64, usize) {
     v.fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
 }
 
-/// The grid point of `pts` nearest `pos` (in 3-D) where `admissible` holds, if any.
+/// The grid point of `pts` nearest `pos` (in 3-D) where `admissible` holds, if any (the
+/// first in grid order among equally near ones). Points are tried nearest first, so that
+/// `admissible` — a field and its projection — is not evaluated over the whole grid.
 fn nearest(
     pts: &[[f64; 3]],
     pos: [f64; 3],
     admissible: &dyn Fn([f64; 3]) -> bool,
 ) -> Option<[f64; 3]> {
     let d2 = |p: &[f64; 3]| (0..3).map(|k| (p[k] - pos[k]).powi(2)).sum::<f64>();
-    pts.iter()
-        .filter(|p| admissible(**p))
-        .min_by(|a, b| d2(a).total_cmp(&d2(b)))
-        .copied()
+    let mut by_distance: Vec<&[f64; 3]> = pts.iter().collect();
+    by_distance.sort_by(|a, b| d2(a).total_cmp(&d2(b)));
+    by_distance.into_iter().copied().find(|p| admissible(*p))
 }
 
 /// The candidates of a table of the statistic (`table[point][epoch]`, grid points `pts`) as
