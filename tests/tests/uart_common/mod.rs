@@ -4,8 +4,8 @@
 #![allow(dead_code)]
 
 use magic_core::{Flags, Model, Variant};
+pub use magic_tests::toolchain_ready;
 use magic_train::data::records::{self, ObsRow};
-use magic_train::firmware::qemu::ensure_toolchain;
 use magic_train::firmware::qemu_uart::UartQemu;
 use magic_train::firmware::station::{Link, Station};
 use magic_train::gnss::synth;
@@ -18,17 +18,6 @@ use std::time::Duration;
 pub const HOST_TOLERANCE: f64 = 1e-4;
 /// Days in the stream (and in [`days`]' file).
 pub const DAYS: usize = 10_000;
-
-pub fn toolchain_ready() -> bool {
-    match ensure_toolchain() {
-        Ok(()) => true,
-        Err(e) if std::env::var("MAGIC_SKIP_QEMU").as_deref() == Ok("1") => {
-            eprintln!("notice: skipping the firmware test (MAGIC_SKIP_QEMU=1): {e}");
-            false
-        }
-        Err(e) => panic!("{e:#}\n(set MAGIC_SKIP_QEMU=1 to skip the QEMU tests)"),
-    }
-}
 
 pub fn temp_dir() -> PathBuf {
     let dir = std::env::temp_dir().join(format!("magic-uart-test-{}", std::process::id()));
