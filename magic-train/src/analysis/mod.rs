@@ -112,12 +112,21 @@ pub struct Analysis {
 }
 
 impl Analysis {
-    /// The most significant candidate that can be added to F and whose family F does not
-    /// declare yet.
+    /// The most significant candidate that can be added to F and whose effect F does not
+    /// declare yet (`declared`: the families of F's effects, [`OwnedEffect::family`]). The
+    /// effect's family, not the candidate's, decides: two candidate families may declare the
+    /// same term (a second source found as an episode or as a change that stays), and F holds
+    /// one term of each kind — a second copy would buy the encoder another free variable for
+    /// whatever the first one left, not a second effect.
+    ///
+    /// [`OwnedEffect::family`]: crate::model::OwnedEffect::family
     pub fn top_declarable(&self, declared: &[&str]) -> Option<&Candidate> {
-        self.effects
-            .iter()
-            .find(|c| c.significant && c.effect.is_some() && !declared.contains(&c.family.as_str()))
+        self.effects.iter().find(|c| {
+            c.significant
+                && c.effect
+                    .as_ref()
+                    .is_some_and(|e| !declared.contains(&e.family()))
+        })
     }
 
     /// The JSON report (`{"effects": [{"family", "variance_explained", "chance_level",
@@ -231,4 +240,42 @@ pub fn effects_chart(path: &Path, title: &str, effects: &[Candidate]) -> Result<
         .collect();
     let chance: Vec<f64> = effects.iter().map(|c| 100.0 * c.chance_level).collect();
     crate::report::plots::bar_chart(path, title, &labels, &values, &chance)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::OwnedEffect;
+
+    fn significant(family: &str, score: f64, effect: OwnedEffect) -> Candidate {
+        let noise = vec![0.010, 0.012, 0.008, 0.011, 0.009, 0.010, 0.013, 0.007];
+        let mut c = Candidate::from_scores(family, score, noise, 0.95, json!({}), None);
+        c.effect = Some(effect);
+        c
+    }
+
+    #[test]
+    fn a_declared_term_is_not_added_again_under_another_family() {
+        let source = OwnedEffect::SecondSource {
+            x_km: 1.0,
+            y_km: -2.0,
+            depth_km: 4.0,
+        };
+        let analysis = Analysis {
+            problem: "mogi",
+            splits: vec![],
+            effects: vec![
+                significant("lasting_source", 0.3, source.clone()),
+                significant("second_source", 0.2, source),
+                significant("common_mode", 0.1, OwnedEffect::CommonMode),
+            ],
+            residuals: json!({}),
+            summary: String::new(),
+            seconds: 0.0,
+        };
+        let top = |declared: &[&str]| analysis.top_declarable(declared).map(|c| c.family.clone());
+        assert_eq!(top(&[]).as_deref(), Some("lasting_source"));
+        assert_eq!(top(&["second_source"]).as_deref(), Some("common_mode"));
+        assert_eq!(top(&["second_source", "common_mode"]), None);
+    }
 }

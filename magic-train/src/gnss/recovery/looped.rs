@@ -1,11 +1,12 @@
 //! The whole loop against the truth (`magic synth-loop`): which effects it added and kept, by
 //! the rules of [`recovery`] applied to the kept additions (an injected effect
 //! counts when an effect of its kind was kept with its key parameters recovered; any other kept
-//! addition the noise does not hold is a false one), and the test MSE before and after, over
-//! seeds.
+//! addition the noise does not hold is a false one, and so is a copy of an injected kind beyond
+//! as many as were injected), and the test MSE before and after, over seeds.
 
-use super::{frac, recovery, Recovery};
+use super::{frac, recovery, same_effect, Recovery};
 use crate::analysis::Candidate;
+use crate::gnss::synth::truth::injected;
 use crate::numerics::mean_std;
 use std::fmt::Write as _;
 
@@ -26,8 +27,10 @@ impl LoopRun {
     /// Compares the loop's kept additions (`added`, the candidates it declared and kept) with a
     /// truth of `magic synth`.
     pub fn new(truth: &serde_json::Value, added: &[Candidate], b: [f64; 2], c: [f64; 2]) -> Self {
+        let mut recovery = recovery(truth, added);
+        recovery.false_additions.extend(copies(truth, added));
         LoopRun {
-            recovery: recovery(truth, added),
+            recovery,
             added: added.iter().map(Candidate::short).collect(),
             b,
             c,
@@ -38,6 +41,23 @@ impl LoopRun {
     pub fn ok(&self) -> bool {
         self.recovery.all_found() && self.recovery.false_additions.is_empty()
     }
+}
+
+/// The kept additions beyond as many of a kind ([`same_effect`]) as the truth injects, each as
+/// `family (again)`: a second source kept twice for one injected is one false addition, though
+/// either copy alone would recover it.
+fn copies(truth: &serde_json::Value, added: &[Candidate]) -> Vec<String> {
+    let injected = injected(truth);
+    let mut out = Vec::new();
+    for (i, c) in added.iter().enumerate() {
+        let kind = |f: &str| same_effect(f, &c.family);
+        let before = added[..i].iter().filter(|a| kind(&a.family)).count();
+        let allowed = injected.iter().filter(|e| kind(&e.family)).count();
+        if allowed > 0 && before >= allowed {
+            out.push(format!("{} (again)", c.family));
+        }
+    }
+    out
 }
 
 /// `mean ± sd → mean ± sd` of before/after pairs.
@@ -157,5 +177,21 @@ mod tests {
             "{row}"
         );
         assert!(row.contains("0.8000 ± 0.0000 → 0.7000 ± 0.1000"), "{row}");
+    }
+
+    #[test]
+    fn a_source_kept_twice_for_one_injected_is_a_false_addition() {
+        let truth = json!({"scenario": "lasting_deflation_near", "seed": 4,
+            "effects": [{"family": "lasting_source", "params": {"x_km": -0.8, "y_km": 3.3,
+            "depth_km": 3.4}}]});
+        let at = |x: f64, y: f64| json!({"x_km": x, "y_km": y, "depth_km": 4.0});
+        let right = added("lasting_source", at(-0.75, 3.5));
+        let mirror = added("lasting_source", at(1.0, -4.0));
+        let once = LoopRun::new(&truth, std::slice::from_ref(&right), [0.7, 0.6], [0.9, 0.8]);
+        assert!(once.ok(), "{:?}", once.recovery.false_additions);
+        let twice = LoopRun::new(&truth, &[right, mirror], [0.7, 0.5], [0.9, 0.8]);
+        assert!(twice.recovery.all_found());
+        assert_eq!(twice.recovery.false_additions, ["lasting_source (again)"]);
+        assert!(!twice.ok());
     }
 }
