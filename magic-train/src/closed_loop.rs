@@ -4,9 +4,9 @@
 //! then analyses B's residuals ([`crate::analysis`]: every family scored on held-out data against
 //! chance), adds the top significant family whose term can be declared in F and is not yet (one
 //! term of each kind: [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
-//! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE — significance in the
-//! residuals is necessary, not sufficient; an effect that does not is taken out again and the
-//! loop stops. The loop ends with a [`StopReason`] the report prints. Effects the problem names
+//! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
+//! significance in the residuals is necessary, not sufficient; an effect that does not is taken
+//! out again and the loop stops. The loop ends with a [`StopReason`] the report prints. Effects the problem names
 //! for a direct test ([`Problem::direct_tests`]) and that the loop did not add are then tried on
 //! top of the last F kept. Every round is scored the same way: train/valid/test MSE of B and C,
 //! physics-only errors, the size of C's correction, the problem's metrics and, where the problem
