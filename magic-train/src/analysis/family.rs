@@ -131,28 +131,36 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
         }
         if let Some(stat) = self.statistic(&fit) {
             let of_surrogates: Vec<f64> = surrogates.iter().filter_map(|s| s.1).collect();
-            let top = of_surrogates
-                .iter()
-                .copied()
-                .fold(f64::NEG_INFINITY, f64::max);
-            if c.rejected.is_none() {
-                if stat <= top && self.statistic_vetoes() {
-                    c.significant = false;
-                    c.rejected = Some(Rejection::StatisticNotAbove {
-                        statistic: stat,
-                        largest: top,
-                    });
-                } else if carries(self.statistic_vetoes(), &c) {
-                    c.significant |= stands_out(stat, &of_surrogates);
-                }
-            }
-            c.statistic = Some((stat, of_surrogates));
+            with_statistic(&mut c, stat, of_surrogates, self.statistic_vetoes());
         }
         if c.significant && opts.bootstrap > 0 {
             c.uncertainty = bootstrap(self, res, &fit, opts)?;
         }
         Ok(c)
     }
+}
+
+/// Judges a scored candidate `c` by its family's detection statistic `stat` against the
+/// surrogates' (the rule of [`Family::statistic`]: a vetoing statistic the surrogates reach
+/// rejects; one that [`stands_out`] makes significant a score the rule lets through), and
+/// keeps both on it.
+pub fn with_statistic(c: &mut Candidate, stat: f64, of_surrogates: Vec<f64>, vetoes: bool) {
+    let top = of_surrogates
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    if c.rejected.is_none() {
+        if stat <= top && vetoes {
+            c.significant = false;
+            c.rejected = Some(Rejection::StatisticNotAbove {
+                statistic: stat,
+                largest: top,
+            });
+        } else if carries(vetoes, c) {
+            c.significant |= stands_out(stat, &of_surrogates);
+        }
+    }
+    c.statistic = Some((stat, of_surrogates));
 }
 
 /// Whether a candidate's held-out score lets a statistic that [`stands_out`] make it significant.

@@ -6,6 +6,7 @@ use crate::analysis::{AnalysisOptions, MainSource};
 use crate::closed_loop::{self, LoopOptions};
 use crate::data::SplitName;
 use crate::gnss::data::write_dir;
+use crate::gnss::recovery::at_truth::truth_table;
 use crate::gnss::recovery::coverage::Coverage;
 use crate::gnss::recovery::looped::{loop_table, LoopRun};
 use crate::gnss::recovery::misses::miss_table;
@@ -175,6 +176,13 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
     let mut table = recovery_table(&rows);
     table.push_str("\nWhy an injected effect was missed (placements together):\n\n");
     table.push_str(&miss_table(&rows));
+    let at_truth = truth_table(&rows);
+    if !at_truth.is_empty() {
+        table.push_str(
+            "\nLasting changes judged at the truth (its position, the best scanned onset within its change):\n\n",
+        );
+        table.push_str(&at_truth);
+    }
     if !coverage.is_empty() {
         table.push_str(
             "\nBootstrap standard deviations against the truth, and the shift its draws see beside the mean error (significant candidates):\n\n",

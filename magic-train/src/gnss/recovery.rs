@@ -16,6 +16,7 @@ use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate, Rejection};
 use crate::numerics::median;
 use crate::train::{train_model, ModelKind, TrainConfig};
 use anyhow::Result;
+use at_truth::AtTruth;
 use magic_core::Model;
 use serde_json::json;
 use std::fmt::Write as _;
@@ -44,6 +45,8 @@ pub struct Found {
     /// Why its family's candidate cannot count as a discovery, if a rule rejected it (e.g. on
     /// the bound of its search grid).
     pub rejected: Option<Rejection>,
+    /// A lasting change judged at its truth ([`at_truth`]); `None` for other effects.
+    pub at_truth: Option<AtTruth>,
 }
 
 impl Found {
@@ -102,14 +105,20 @@ impl Recovery {
             .iter()
             .map(|f| {
                 format!(
-                    "{}: {}{}",
+                    "{}: {}{}{}",
                     f.family,
                     if f.significant {
                         ""
                     } else {
                         "not significant; "
                     },
-                    f.detail
+                    f.detail,
+                    f.at_truth.as_ref().map_or(String::new(), |t| format!(
+                        "; at the truth {:.2} % vs chance {:.2} %{}",
+                        100.0 * t.score,
+                        100.0 * t.chance,
+                        if t.significant { ", significant" } else { "" }
+                    ))
                 )
             })
             .collect();
@@ -130,7 +139,8 @@ impl Recovery {
             "ranked_first": self.ranked_first(), "all_found": self.all_found(),
             "effects": self.effects.iter().map(|f| json!({"family": f.family,
                 "significant": f.significant, "rank": f.rank, "params_ok": f.params_ok,
-                "found": f.found(), "detail": f.detail})).collect::<Vec<_>>(),
+                "found": f.found(), "detail": f.detail,
+                "at_truth": f.at_truth.as_ref().map(AtTruth::to_json)})).collect::<Vec<_>>(),
             "false_additions": self.false_additions,
             "background_found": self.background_found,
         })
@@ -267,6 +277,7 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
             params_ok: false,
             detail: format!("family {} not analysed", e.family),
             rejected: None,
+            at_truth: None,
         };
     };
     let (params_ok, detail) = compare(&e.family, &e.params, &c.params);
@@ -281,6 +292,7 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
             format!("as {}: {detail}", c.family)
         },
         rejected: c.rejected.clone(),
+        at_truth: None,
     }
 }
 
@@ -354,9 +366,13 @@ pub fn check_one(spec: &Spec, cfg: &TrainConfig, opts: &AnalysisOptions) -> Resu
     let (model, _) = train_model(&s.problem, ModelKind::B, &[], cfg, spec.seed)?;
     let bytes = model.encode()?;
     let m = Model::decode(&bytes)?;
-    let (analysis, _) = analyse(&s.problem, &m, opts)?;
+    let (analysis, res) = analyse(&s.problem, &m, opts)?;
+    let mut recovery = recovery(&s.truth, &analysis.effects);
+    for (f, e) in recovery.effects.iter_mut().zip(injected(&s.truth)) {
+        f.at_truth = at_truth::lasting(&res, &e, &analysis.effects, opts);
+    }
     Ok(Check {
-        recovery: recovery(&s.truth, &analysis.effects),
+        recovery,
         analysis,
         truth: s.truth,
     })
@@ -459,6 +475,7 @@ pub fn recovery_table(rows: &[Recovery]) -> String {
     s
 }
 
+pub mod at_truth;
 pub mod coverage;
 pub mod looped;
 pub mod misses;

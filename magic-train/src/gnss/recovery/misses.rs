@@ -113,6 +113,7 @@ mod tests {
             params_ok,
             detail: String::new(),
             rejected,
+            at_truth: None,
         }
     }
 
