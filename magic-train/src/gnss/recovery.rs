@@ -359,6 +359,23 @@ pub struct Check {
     pub truth: serde_json::Value,
 }
 
+#[cfg(test)]
+impl Recovery {
+    /// A run (seed 1) whose one injected effect was recovered as `f`, nothing else found.
+    pub(crate) fn single(scenario: &str, noise: &str, placement: &str, f: Found) -> Recovery {
+        Recovery {
+            scenario: scenario.into(),
+            noise: noise.into(),
+            placement: placement.into(),
+            seed: 1,
+            top: f.family.clone(),
+            effects: vec![f],
+            false_additions: vec![],
+            background_found: vec![],
+        }
+    }
+}
+
 /// Generates a dataset, trains a B model on it (seeded with the dataset's seed) and analyses
 /// its residuals.
 pub fn check_one(spec: &Spec, cfg: &TrainConfig, opts: &AnalysisOptions) -> Result<Check> {

@@ -176,16 +176,7 @@ mod tests {
                 fit_score: 0.02,
             }),
         };
-        Recovery {
-            scenario: "lasting_deflation_far".into(),
-            noise: noise.into(),
-            placement: "valid".into(),
-            seed: 1,
-            top: f.family.clone(),
-            effects: vec![f],
-            false_additions: vec![],
-            background_found: vec![],
-        }
+        Recovery::single("lasting_deflation_far", noise, "valid", f)
     }
 
     #[test]

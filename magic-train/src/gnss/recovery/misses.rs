@@ -118,16 +118,7 @@ mod tests {
     }
 
     fn row(placement: &str, f: Found) -> Recovery {
-        Recovery {
-            scenario: "second_source_near".into(),
-            noise: "paper".into(),
-            placement: placement.into(),
-            seed: 1,
-            top: f.family.clone(),
-            effects: vec![f],
-            false_additions: vec![],
-            background_found: vec![],
-        }
+        Recovery::single("second_source_near", "paper", placement, f)
     }
 
     #[test]
