@@ -6,11 +6,11 @@
 //! term of each kind: [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
 //! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
 //! significance in the residuals is necessary, not sufficient; an effect that does not is taken
-//! out again and the loop stops. The loop ends with a [`StopReason`] the report prints. Effects the problem names
-//! for a direct test ([`Problem::direct_tests`]) and that the loop did not add are then tried on
-//! top of the last F kept. Every round is scored the same way: train/valid/test MSE of B and C,
-//! physics-only errors, the size of C's correction, the problem's metrics and, where the problem
-//! has one, a classical baseline with the same declared effects.
+//! out again and the loop stops. The loop ends with a [`StopReason`] the report prints. Effects
+//! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
+//! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
+//! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
+//! where the problem has one, a classical baseline with the same declared effects.
 
 use crate::analysis::{analyse, AnalysisOptions, Candidate};
 use crate::eval::evaluate_splits;

@@ -104,7 +104,6 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
 
     fn assess(&self, res: &R, opts: &AnalysisOptions) -> Result<Candidate> {
         let fit = self.fit(res)?;
-        let score = self.score(&fit);
         let seeds = surrogate_seeds(opts.seed, self.name(), opts.surrogates.max(2));
         let surrogates = seeds
             .par_iter()
@@ -116,23 +115,8 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
             })
             .collect::<Result<Vec<(f64, Option<f64>)>>>()?;
         let chance = surrogates.iter().map(|s| s.0).collect();
-        let mut c = Candidate::from_scores(
-            self.name(),
-            score,
-            chance,
-            opts.quantile,
-            self.params(res, &fit),
-            self.declare(res, &fit),
-        )
-        .with_floor(self.min_excess(res));
-        if let Some(why) = self.reject(res, &fit) {
-            c.significant = false;
-            c.rejected = Some(why);
-        }
-        if let Some(stat) = self.statistic(&fit) {
-            let of_surrogates: Vec<f64> = surrogates.iter().filter_map(|s| s.1).collect();
-            with_statistic(&mut c, stat, of_surrogates, self.statistic_vetoes());
-        }
+        let of_surrogates = surrogates.iter().filter_map(|s| s.1).collect();
+        let mut c = judge(self, res, &fit, chance, of_surrogates, opts.quantile);
         if c.significant && opts.bootstrap > 0 {
             c.uncertainty = bootstrap(self, res, &fit, opts)?;
         }
@@ -140,11 +124,43 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
     }
 }
 
+/// A fit of `family` to `res` judged against its surrogates' scores (`chance`) and detection
+/// statistics (`of_surrogates`) by the family's rules — its score's margin over chance, its
+/// rejections, its detection statistic ([`Family::statistic`]): the candidate
+/// [`DynFamily::assess`] returns, before the bootstrap. Any fit can be judged so, a synthetic
+/// truth's too (`gnss::recovery::at_truth`).
+pub fn judge<R, F: Family<R>>(
+    family: &F,
+    res: &R,
+    fit: &F::Fit,
+    chance: Vec<f64>,
+    of_surrogates: Vec<f64>,
+    quantile: f64,
+) -> Candidate {
+    let mut c = Candidate::from_scores(
+        family.name(),
+        family.score(fit),
+        chance,
+        quantile,
+        family.params(res, fit),
+        family.declare(res, fit),
+    )
+    .with_floor(family.min_excess(res));
+    if let Some(why) = family.reject(res, fit) {
+        c.significant = false;
+        c.rejected = Some(why);
+    }
+    if let Some(stat) = family.statistic(fit) {
+        with_statistic(&mut c, stat, of_surrogates, family.statistic_vetoes());
+    }
+    c
+}
+
 /// Judges a scored candidate `c` by its family's detection statistic `stat` against the
 /// surrogates' (the rule of [`Family::statistic`]: a vetoing statistic the surrogates reach
 /// rejects; one that [`stands_out`] makes significant a score the rule lets through), and
 /// keeps both on it.
-pub fn with_statistic(c: &mut Candidate, stat: f64, of_surrogates: Vec<f64>, vetoes: bool) {
+fn with_statistic(c: &mut Candidate, stat: f64, of_surrogates: Vec<f64>, vetoes: bool) {
     let top = of_surrogates
         .iter()
         .copied()

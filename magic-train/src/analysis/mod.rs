@@ -16,7 +16,7 @@ pub mod score;
 pub mod surrogate;
 
 pub use candidate::{rank, stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
-pub use family::{surrogate_seeds, with_statistic, DynFamily, Family};
+pub use family::{judge, surrogate_seeds, DynFamily, Family};
 pub use rejection::{Rejection, Side};
 
 use crate::data::SplitName;

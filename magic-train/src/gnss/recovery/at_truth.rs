@@ -8,7 +8,7 @@
 //! not the same.)
 
 use super::{Found, Recovery};
-use crate::analysis::{with_statistic, AnalysisOptions, Candidate, Family};
+use crate::analysis::{judge, AnalysisOptions, Candidate, Family};
 use crate::gnss::families::lasting_source::{fit_at, LastingSource};
 use crate::gnss::synth::truth::Injected;
 use crate::gnss::GnssResiduals;
@@ -49,27 +49,18 @@ pub fn lasting(
     let family = LastingSource;
     let own = candidates.iter().find(|c| c.family == family.name())?;
     let fit = fit_at(res, pos, from as f64, to as f64);
-    let mut c = Candidate::from_scores(
-        family.name(),
-        fit.score,
+    let of_surrogates = own
+        .statistic
+        .as_ref()
+        .map_or_else(Vec::new, |s| s.1.clone());
+    let c = judge(
+        &family,
+        res,
+        &fit,
         own.surrogate_scores.clone(),
+        of_surrogates,
         opts.quantile,
-        json!({}),
-        None,
-    )
-    .with_floor(family.min_excess(res));
-    if let Some(why) = family.reject(res, &fit) {
-        c.significant = false;
-        c.rejected = Some(why);
-    }
-    if let Some((_, of_surrogates)) = &own.statistic {
-        with_statistic(
-            &mut c,
-            fit.stat,
-            of_surrogates.clone(),
-            family.statistic_vetoes(),
-        );
-    }
+    );
     Some(AtTruth {
         score: fit.score,
         chance: c.chance_level,
