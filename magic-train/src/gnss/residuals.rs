@@ -185,14 +185,36 @@ impl GnssResiduals {
     /// within 30 % in 36 of 40 fitted to the projected rows, 11–37 %; in 40 fitted to these,
     /// 11–27 %; in 38 with the translations given back too, 6–31 %).
     pub fn given_back(&self) -> Option<Block> {
+        self.give_back(&translation_basis(&self.ctx.scale, self.ns()))
+    }
+
+    /// The rows [`GnssResiduals::given_back`] with the translations' part given back too, when
+    /// F declares them (the common mode; else `None`, as for a draw). The declared common mode's
+    /// daily translation then holds the network's share of every station's annual term: what a
+    /// station's annual amplitude is, whichever of the two effects was declared first. It is not
+    /// what F's seasonal term should hold beside it: the encoder, which does not see the date,
+    /// puts the network's share in its translation (declared there too, trial seeds 101–105
+    /// under `red`, `common_mode+seasonal`: B's test MSE after the loop 0.01–0.04 higher).
+    pub fn given_back_whole(&self) -> Option<Block> {
+        let declared = translation_basis(&self.ctx.scale, self.ns())
+            .iter()
+            .all(|t| {
+                let p = self.project(t);
+                dot(&p, &p) < TRANSLATIONS_DECLARED
+            });
+        declared.then(|| self.give_back(&[])).flatten()
+    }
+
+    /// The analysed rows plus what the projection took, less its part along the orthonormal
+    /// `kept`.
+    fn give_back(&self, kept: &[Vec<f64>]) -> Option<Block> {
         let taken = self.taken.as_deref()?;
-        let translations = translation_basis(&self.ctx.scale, self.ns());
         let r = self
             .fit
             .r
             .chunks(self.nc())
             .zip(taken.chunks(self.nc()))
-            .flat_map(|(r, t)| r.iter().zip(project(&translations, t)).map(|(a, b)| a + b))
+            .flat_map(|(r, t)| r.iter().zip(project(kept, t)).map(|(a, b)| a + b))
             .collect();
         Some(Block {
             days: self.fit.days.clone(),
@@ -318,6 +340,10 @@ fn invert_split(
             .collect::<Result<_>>()?;
     Ok((days, rows))
 }
+
+/// Squared norm below which a unit translation (standardised units) lies in F's tangent: F
+/// declares the common mode ([`GnssResiduals::given_back_whole`]).
+const TRANSLATIONS_DECLARED: f64 = 1e-9;
 
 /// Residuals (observation − F(E(x)), standardised) of every day of `splits`, in time order, with
 /// the tangent space of F at the main source's typical position.

@@ -1,8 +1,10 @@
 //! `seasonal`: per-station annual and semiannual terms (loading, monument thermal expansion,
 //! multipath). Fitted: declared, its constants (4 per channel, mm) enter F as a function of the
 //! date. Scored (and its surrogates drawn) on the projected residuals, what F cannot produce;
-//! its amplitudes reported and declared from the rows with the projection's part given back
-//! ([`GnssResiduals::given_back`]), F's daily variables taken not to follow the calendar.
+//! its amplitudes declared from the rows with the projection's part given back
+//! ([`GnssResiduals::given_back`]), F's daily variables taken not to follow the calendar, and
+//! reported whole, with the network's share a declared common mode holds
+//! ([`GnssResiduals::given_back_whole`]).
 
 use super::dated::{self, Scored, TimeFit};
 use super::latent::round3;
@@ -60,11 +62,18 @@ fn fit_block(b: &Block, nc: usize) -> SeasonalFit {
     }
 }
 
-/// The coefficients reported and declared: fitted to the rows with the projection's part given
-/// back where they are the data's own ([`GnssResiduals::given_back`]), else the fit's.
+/// The coefficients declared: fitted to the rows with the projection's part given back where
+/// they are the data's own ([`GnssResiduals::given_back`]), else the fit's.
 fn coefficients(res: &GnssResiduals, fit: &Scored<SeasonalFit>) -> Vec<Vec<f64>> {
     res.given_back()
         .map_or_else(|| fit.fit.coef.clone(), |b| fit_block(&b, res.nc()).coef)
+}
+
+/// The coefficients reported: each station's whole term, the network's share that a declared
+/// common mode holds included ([`GnssResiduals::given_back_whole`]); else those declared.
+fn reported(res: &GnssResiduals, fit: &Scored<SeasonalFit>) -> Vec<Vec<f64>> {
+    res.given_back_whole()
+        .map_or_else(|| coefficients(res, fit), |b| fit_block(&b, res.nc()).coef)
 }
 
 impl Family<GnssResiduals> for Seasonal {
@@ -88,11 +97,12 @@ impl Family<GnssResiduals> for Seasonal {
     ) -> Result<GnssResiduals> {
         Ok(dated::surrogate(res, &fit.fit, rng))
     }
-    /// Annual and semiannual amplitudes per station and component (mm), of the term in the
-    /// rows given back ([`GnssResiduals::given_back`]).
+    /// Annual and semiannual amplitudes per station and component (mm): each station's whole
+    /// term ([`GnssResiduals::given_back_whole`]), of which F's term holds the part beside the
+    /// network's share when F has a common mode.
     fn params(&self, res: &GnssResiduals, fit: &Self::Fit) -> serde_json::Value {
         let ns = res.ns();
-        let coef = &coefficients(res, fit);
+        let coef = &reported(res, fit);
         let amp = |c: usize, j: usize| coef[c][j].hypot(coef[c][j + 1]) * res.ctx.scale[c];
         let per_station = |j: usize| {
             let mut m = serde_json::Map::new();

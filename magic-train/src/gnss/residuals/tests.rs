@@ -346,6 +346,74 @@ fn the_rows_given_back_hold_a_term_in_the_span() {
 /// A day whose encoder put the main source deep and at its volume bound, with a network
 /// translation in the data: the refit finds the source where the data put it, the translation
 /// fitted beside it.
+/// With the common mode declared (the translations in F's tangent), the projection takes an
+/// annual network translation off whole: the rows given back whole hold it again (a station's
+/// annual amplitude, whichever effect the loop declared first), the rows given back keep only
+/// each station's part beside the network's. Without the common mode there is nothing more to
+/// give back.
+#[test]
+fn the_rows_given_back_hold_a_declared_translations_annual_term() {
+    let network = Network::akutan();
+    let (ns, nc) = (network.len(), 3 * network.len());
+    let mut rng = StdRng::seed_from_u64(6);
+    let mut normal = move || draw::normal(&mut rng);
+    let scale = vec![1.0; nc];
+    let mut columns: Vec<(Vec<f64>, f64)> = (0..SOURCE_VARIABLES)
+        .map(|_| ((0..nc).map(|_| normal()).collect(), 1.0))
+        .collect();
+    columns.extend((0..3).map(|k| (translation(&scale, ns, k), 1.0)));
+    let w = std::f64::consts::TAU / 365.25;
+    let days: Vec<f64> = (0..2000).map(|t| t as f64).collect();
+    // 1.5 (east) and 3 (up) along the translations, plus a station's own annual term.
+    let rows: Vec<Vec<f64>> = days
+        .iter()
+        .map(|d| {
+            let s = (w * d).sin();
+            (0..nc)
+                .map(|c| match (c / ns, c % ns) {
+                    (0, 0) => 2.5 * s,
+                    (0, _) => 1.5 * s,
+                    (2, _) => 3.0 * s,
+                    _ => 0.0,
+                } + 0.3 * normal())
+                .collect()
+        })
+        .collect();
+    let shared = plain(&network, &scale, &days);
+    let res = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
+    let basis = |d: f64, b: &mut [f64]| {
+        b[0] = 1.0;
+        b[1] = (w * d).sin();
+    };
+    let fitted = |r: &[f64]| crate::gnss::families::dated::fit_basis(r, &days, nc, 2, &basis);
+    let back = fitted(&res.given_back_whole().expect("the common mode declared").r);
+    let projected = fitted(&res.given_back().expect("the data's own residuals").r);
+    for c in 0..nc {
+        let want = match (c / ns, c % ns) {
+            (0, 0) => 2.5,
+            (0, _) => 1.5,
+            (2, _) => 3.0,
+            _ => 0.0,
+        };
+        assert!(
+            (back[c][1] - want).abs() < 0.05,
+            "channel {c}: {} vs {want}",
+            back[c][1]
+        );
+    }
+    // Given back, the east translation's share stays taken: what is left is station 0's own
+    // term less its network mean.
+    let mean_east = (0..ns).map(|c| projected[c][1]).sum::<f64>() / ns as f64;
+    assert!(mean_east.abs() < 0.05, "{mean_east}");
+    assert!((projected[0][1] - 1.0 * (1.0 - 1.0 / ns as f64)).abs() < 0.05);
+    let without = view(
+        &shared,
+        &rows,
+        orthonormal(&columns[..SOURCE_VARIABLES], 1e-9, 1),
+    );
+    assert!(without.given_back_whole().is_none());
+}
+
 #[test]
 fn a_deep_encoder_source_is_refitted_where_the_data_put_it() {
     let network = Network::akutan();
