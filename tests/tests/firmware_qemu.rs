@@ -15,10 +15,10 @@
 use magic_core::model_file::{Model, Variant};
 use magic_core::mogi::{self, Station, PAPER_BOUNDS};
 use magic_core::nn::Activation;
-use magic_tests::toolchain_ready;
+use magic_tests::{toolchain_ready, TempDir};
 use magic_train::firmware::qemu::{build_firmware, build_firmware_with, run_firmware};
 use magic_train::model::{OwnedEffect, OwnedLayer, OwnedModel, OwnedWeights};
-use std::path::PathBuf;
+use std::path::Path;
 
 const N_STATIONS: usize = 12;
 const N_OBS: usize = 3 * N_STATIONS;
@@ -254,12 +254,6 @@ fn run_lines(elf: &std::path::Path, lines: &[String]) -> magic_train::firmware::
     run
 }
 
-fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("magic-firmware-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 #[test]
 fn firmware_agrees_with_the_host() {
     if !toolchain_ready() {
@@ -267,7 +261,8 @@ fn firmware_agrees_with_the_host() {
     }
     let bytes = model_bytes();
     let model = Model::decode(&bytes).unwrap();
-    let path = temp_dir().join("model.magic");
+    let tmp = TempDir::new("firmware");
+    let path = tmp.join("model.magic");
     std::fs::write(&path, &bytes).unwrap();
     let elf = build_firmware(&path).expect("building the firmware");
 
@@ -392,15 +387,23 @@ fn effects_models_run_on_the_firmware() {
             rate: (0..N_OBS).map(|_| rng.next() as f32).collect(),
         },
     ];
-    check_effects_model("first", first, 4 + 3 + 1, &mut rng);
-    check_effects_model("second", second, 4 + 1, &mut rng);
+    let tmp = TempDir::new("firmware");
+    check_effects_model(&tmp.0, "first", first, 4 + 3 + 1, &mut rng);
+    check_effects_model(&tmp.0, "second", second, 4 + 1, &mut rng);
 }
 
-fn check_effects_model(name: &str, effects: Vec<OwnedEffect>, n_params: usize, rng: &mut Rng) {
+/// Builds the firmware with an effects model (written into `dir`) and checks it against the host.
+fn check_effects_model(
+    dir: &Path,
+    name: &str,
+    effects: Vec<OwnedEffect>,
+    n_params: usize,
+    rng: &mut Rng,
+) {
     let bytes = model_bytes_with(effects);
     let model = Model::decode(&bytes).unwrap();
     assert!(model.needs_time());
-    let path = temp_dir().join(format!("effects-{name}.magic"));
+    let path = dir.join(format!("effects-{name}.magic"));
     std::fs::write(&path, &bytes).unwrap();
     let elf = build_firmware(&path).expect("building the firmware with an effects model");
 
@@ -472,7 +475,8 @@ fn standard_deviations_run_on_the_firmware() {
     ];
     let bytes = model_bytes_with(effects);
     let model = Model::decode(&bytes).unwrap();
-    let path = temp_dir().join("sd.magic");
+    let tmp = TempDir::new("firmware");
+    let path = tmp.join("sd.magic");
     std::fs::write(&path, &bytes).unwrap();
     let elf = build_firmware_with(&path, &["sd"]).expect("building the firmware with `sd`");
     let mut rng = Rng(0x0DDB_A11C_AFE5_EED5);
@@ -552,11 +556,12 @@ fn corrupt_models_are_rejected_by_the_firmware() {
     let mut flipped = bytes.clone();
     flipped[bytes.len() / 2] ^= 0x04;
     let truncated = bytes[..bytes.len() - 100].to_vec();
+    let tmp = TempDir::new("firmware");
     for (name, b, want) in [
         ("flipped", flipped, "corrupt"),
         ("truncated", truncated, "truncated"),
     ] {
-        let path = temp_dir().join(format!("{name}.magic"));
+        let path = tmp.join(&format!("{name}.magic"));
         std::fs::write(&path, &b).unwrap();
         let elf = build_firmware(&path).expect("building the firmware");
         let run = run_firmware(&elf, "1,2,3\n", TIMEOUT_S).expect("running the firmware");
@@ -575,7 +580,8 @@ fn no_panic_is_reachable_in_the_firmware() {
         return;
     }
     let bytes = model_bytes();
-    let path = temp_dir().join("panic-never.magic");
+    let tmp = TempDir::new("firmware");
+    let path = tmp.join("panic-never.magic");
     std::fs::write(&path, &bytes).unwrap();
     // Links only if the optimised firmware contains no call of the panic machinery.
     let elf = build_firmware_with(&path, &["panic-never"]).expect(

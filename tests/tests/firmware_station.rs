@@ -12,12 +12,13 @@
 mod uart_common;
 
 use magic_core::{Model, Variant};
+use magic_tests::TempDir;
 use magic_train::data::records;
 use magic_train::firmware::qemu::build_firmware;
 use magic_train::firmware::qemu_uart::{build_deployable, UartQemu};
 use magic_train::firmware::station;
 use std::time::Duration;
-use uart_common::{agrees, connect, days, model, temp_dir, toolchain_ready};
+use uart_common::{agrees, connect, days, model, toolchain_ready};
 
 /// The board's standard deviations (f64 in software from its f32 inversion) against the host's,
 /// relative: the bound of the measuring firmware's test (firmware_qemu.rs, measured 2.5e-6 there).
@@ -30,11 +31,12 @@ fn station_command_writes_one_row_per_input_row() {
     }
     let bytes = model(41);
     let m = Model::decode(&bytes).unwrap();
-    let dir = temp_dir();
+    let tmp = TempDir::new("uart");
+    let dir = &tmp.0;
     let model_path = dir.join("cli.magic");
     std::fs::write(&model_path, &bytes).unwrap();
     // 40 days, the sixth with a value that is not a number (file line 7, its fourth field).
-    let (full, _) = days(&m, "cli-all.csv");
+    let (full, _) = days(&m, dir, "cli-all.csv");
     let text = std::fs::read_to_string(full).unwrap();
     let mut lines: Vec<String> = text.lines().take(41).map(String::from).collect();
     let mut f: Vec<&str> = lines[6].split(',').collect();
@@ -90,10 +92,11 @@ fn deployable_firmware_with_standard_deviations() {
     }
     let bytes = model(43);
     let m = Model::decode(&bytes).unwrap();
-    let dir = temp_dir();
+    let tmp = TempDir::new("uart");
+    let dir = &tmp.0;
     let model_path = dir.join("sd.magic");
     std::fs::write(&model_path, &bytes).unwrap();
-    let (full, _) = days(&m, "sd-all.csv");
+    let (full, _) = days(&m, dir, "sd-all.csv");
     let text = std::fs::read_to_string(full).unwrap();
     let input = dir.join("sd.csv");
     std::fs::write(
@@ -175,7 +178,8 @@ fn magic_qemu_says_to_export_an_f32_model_before_building() {
     let f32_model = magic_tests::random_mogi_model(Variant::C, 51)
         .encode()
         .unwrap();
-    let path = temp_dir().join("trained-f32.magic");
+    let tmp = TempDir::new("uart");
+    let path = tmp.join("trained-f32.magic");
     std::fs::write(&path, &f32_model).unwrap();
     // What `magic qemu` and `magic demo` build with: refused before cargo runs.
     let err = build_firmware(&path).expect_err("an f32 model does not fit the firmware");

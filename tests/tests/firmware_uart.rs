@@ -20,13 +20,15 @@
 mod uart_common;
 
 use magic_core::Model;
+use magic_tests::TempDir;
 use magic_train::data::records::{self, ObsRow};
 use magic_train::firmware::qemu::{build_firmware, run_firmware};
 use magic_train::firmware::qemu_uart::{build_deployable, semihosting_calls, UartQemu};
 use magic_train::firmware::station::{self, Answer, BoardStatus, Event, Item, Station, Transcript};
 use std::collections::BTreeMap;
+use std::path::Path;
 use std::time::{Duration, Instant};
-use uart_common::{agrees, connect, days, model, temp_dir, toolchain_ready, DAYS};
+use uart_common::{agrees, connect, days, model, toolchain_ready, DAYS};
 
 /// Seconds a semihosting run may take.
 const TIMEOUT_S: u64 = 300;
@@ -295,15 +297,17 @@ fn answers_by_model(t: &Transcript, sc: &Script, ids: &[u32]) -> (Vec<Vec<usize>
     (by_model, results)
 }
 
-/// Against the measuring (semihosting) firmware with the same model: the same text.
+/// Against the measuring (semihosting) firmware with the same model (its file written into
+/// `dir`): the same text.
 fn check_against_measuring(
+    dir: &Path,
     u: &Updates,
     wire: &[String],
     by_model: &[Vec<usize>],
     results: &[String],
 ) {
     for (m, bytes) in [&u.a, &u.b, &u.c].iter().enumerate() {
-        let path = temp_dir().join(format!("model-{m}.magic"));
+        let path = dir.join(format!("model-{m}.magic"));
         std::fs::write(&path, bytes).unwrap();
         let fw = build_firmware(&path).expect("building the measuring firmware");
         let input: String = by_model[m]
@@ -366,7 +370,8 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
         .iter()
         .map(|m| Model::decode(m).unwrap())
         .collect();
-    let (_, rows) = days(&models[0], "days.csv");
+    let tmp = TempDir::new("uart");
+    let (_, rows) = days(&models[0], &tmp.0, "days.csv");
     let (wire, bad) = wire_with_bad_days(&rows);
     // The script, and which model must answer each day.
     let sc = script(&wire, &u);
@@ -401,7 +406,7 @@ fn ten_thousand_days_with_model_updates_in_the_stream() {
     for &i in &bad {
         assert!(results[i].starts_with("error,"), "day {i}: {}", results[i]);
     }
-    check_against_measuring(&u, &wire, &by_model, &results);
+    check_against_measuring(&tmp.0, &u, &wire, &by_model, &results);
     let worst = check_against_host(&models, &rows, (&wire, &bad), &by_model, &results);
     eprintln!(
         "days per model: A {}, B {}, C {}; largest difference from the host {worst:.2e} of a variable's range",
@@ -531,9 +536,10 @@ fn resets_keep_the_last_model_and_the_watchdog_resets_a_hung_board() {
     let elf = build_deployable(&["hang-command"]).expect("building the deployable firmware");
     let mut qemu = UartQemu::start(&elf).expect("starting QEMU");
     let mut st = connect(&mut qemu);
+    let tmp = TempDir::new("uart");
     let day = {
         let m = Model::decode(&a).unwrap();
-        let (_, rows) = days(&m, "reset-days.csv");
+        let (_, rows) = days(&m, &tmp.0, "reset-days.csv");
         station::day_lines(&rows[..8], false)
             .into_iter()
             .map(|l| l.unwrap())
@@ -579,7 +585,8 @@ fn the_deployable_firmware_makes_no_semihosting_call_and_cannot_panic() {
         "semihosting in the deployable firmware: {calls:#?}"
     );
     // The check finds them where they are: in the measuring build.
-    let path = temp_dir().join("measuring.magic");
+    let tmp = TempDir::new("uart");
+    let path = tmp.join("measuring.magic");
     std::fs::write(&path, model(31)).unwrap();
     let measuring = build_firmware(&path).expect("building the measuring firmware");
     let found = semihosting_calls(&measuring).expect("disassembling");

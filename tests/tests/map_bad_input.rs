@@ -4,6 +4,7 @@
 
 mod map_common;
 
+use magic_tests::TempDir;
 use magic_train::raster::geo::GeoRef;
 use magic_train::raster::map::{self, MapOptions};
 use magic_train::raster::writer::{Sample, StripWriter, TiffSpec};
@@ -14,23 +15,23 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+/// A test's own folder (removed when the test ends) and what it holds at the start.
 struct Fixture {
-    dir: PathBuf,
+    dir: TempDir,
     model: PathBuf,
     image: PathBuf,
 }
 
-/// A small C model and an 11-band image (a 16 × 12 block of the test split).
-fn fixture() -> &'static Fixture {
-    static F: OnceLock<Fixture> = OnceLock::new();
-    F.get_or_init(|| {
-        let dir = tmp("bad");
-        let model = dir.join("C.magic");
-        std::fs::write(&model, small_model(ModelKind::C, 2)).unwrap();
-        let image = dir.join("image.tif");
-        write_block(&image, 11, &test_geo());
-        Fixture { dir, model, image }
-    })
+/// A small C model (trained once for all the tests) and an 11-band image (a 16 × 12 block of
+/// the test split), in a folder of the test's own.
+fn fixture() -> Fixture {
+    static MODEL: OnceLock<Vec<u8>> = OnceLock::new();
+    let dir = TempDir::new("map-bad");
+    let model = dir.join("C.magic");
+    std::fs::write(&model, MODEL.get_or_init(|| small_model(ModelKind::C, 2))).unwrap();
+    let image = dir.join("image.tif");
+    write_block(&image, 11, &test_geo());
+    Fixture { dir, model, image }
 }
 
 /// `bands` bands of the test split's first 16 × 12 pixels (band k repeats band k mod 11).
@@ -66,8 +67,8 @@ fn write_block(path: &Path, bands: usize, geo: &GeoRef) {
     wr.finish().unwrap();
 }
 
-fn options(input: &Path, out: &str) -> MapOptions {
-    let f = fixture();
+/// The map of `input` with `f`'s model, to `out` in `f`'s folder.
+fn options(f: &Fixture, input: &Path, out: &str) -> MapOptions {
     MapOptions {
         model: f.model.clone(),
         input: input.to_path_buf(),
@@ -98,12 +99,12 @@ fn a_band_count_that_does_not_match_is_an_error() {
     let f = fixture();
     let p = f.dir.join("three_bands.tif");
     write_block(&p, 3, &test_geo());
-    let e = fails(&options(&p, "x.tif"));
+    let e = fails(&options(&f, &p, "x.tif"));
     assert!(
         e.contains("three_bands.tif") && e.contains("3 bands, the model expects 11"),
         "{e}"
     );
-    let mut o = options(&f.image, "x.tif");
+    let mut o = options(&f, &f.image, "x.tif");
     o.bands = Some(vec!["B02".into(), "B03".into()]);
     let e = fails(&o);
     assert!(e.contains("11 bands, --bands names 2"), "{e}");
@@ -140,7 +141,7 @@ fn an_unsupported_sample_type_is_an_error() {
     tif.write_image::<magic_train::raster::tiff::encoder::colortype::Gray64>(4, 4, &[7u64; 16])
         .unwrap();
     drop(tif);
-    let e = fails(&options(&p, "x.tif"));
+    let e = fails(&options(&f, &p, "x.tif"));
     assert!(
         e.contains("u64.tif") && e.contains("unsupported sample type"),
         "{e}"
@@ -152,7 +153,7 @@ fn an_unsupported_sample_type_is_an_error() {
     tif.write_image::<magic_train::raster::tiff::encoder::colortype::RGB8>(4, 4, &[7u8; 48])
         .unwrap();
     drop(tif);
-    let e = fails(&options(&p, "x.tif"));
+    let e = fails(&options(&f, &p, "x.tif"));
     assert!(e.contains("rgb8.tif: 3 bands, the model expects 11"), "{e}");
 }
 
@@ -165,7 +166,7 @@ fn truncated_or_corrupt_files_are_errors() {
     for k in 0..40 {
         let len = bytes.len() * k / 40;
         std::fs::write(&p, &bytes[..len]).unwrap();
-        let e = fails(&options(&p, "cut_map.tif"));
+        let e = fails(&options(&f, &p, "cut_map.tif"));
         assert!(e.contains("cut.tif"), "cut at {len}: {e}");
         errors += 1;
     }
@@ -175,15 +176,15 @@ fn truncated_or_corrupt_files_are_errors() {
         *b ^= 0x5A;
     }
     std::fs::write(&p, &bad).unwrap();
-    let e = fails(&options(&p, "cut_map.tif"));
+    let e = fails(&options(&f, &p, "cut_map.tif"));
     assert!(
         e.contains("cut.tif") && e.contains("cannot decode strip"),
         "{e}"
     );
-    let e = fails(&options(&f.dir.join("absent.tif"), "x.tif"));
+    let e = fails(&options(&f, &f.dir.join("absent.tif"), "x.tif"));
     assert!(e.contains("absent.tif: cannot open"), "{e}");
     std::fs::write(&p, b"not a tiff at all").unwrap();
-    assert!(fails(&options(&p, "x.tif")).contains("cut.tif: not a readable TIFF"));
+    assert!(fails(&options(&f, &p, "x.tif")).contains("cut.tif: not a readable TIFF"));
     eprintln!("{errors} truncations, corrupt strips, a missing file and a non-TIFF: all errors naming the file");
 }
 
@@ -212,7 +213,7 @@ fn a_missing_or_partial_georeference_is_a_warning() {
     ] {
         let p = f.dir.join(name);
         write_block(&p, 11, &geo);
-        let mut o = options(&p, &format!("{name}.map.tif"));
+        let mut o = options(&f, &p, &format!("{name}.map.tif"));
         o.residual = false;
         let s = map::run(&o).unwrap();
         assert!(
@@ -251,7 +252,7 @@ fn an_scl_of_another_size_is_an_error() {
     .unwrap();
     wr.write_rows(6, &[4u8; 48]).unwrap();
     wr.finish().unwrap();
-    let mut o = options(&f.image, "x.tif");
+    let mut o = options(&f, &f.image, "x.tif");
     o.scl = Some(p);
     let e = fails(&o);
     assert!(
@@ -292,10 +293,10 @@ fn other_models_and_options_are_errors() {
             .unwrap(),
     )
     .unwrap();
-    let mut o = options(&f.image, "x.tif");
+    let mut o = options(&f, &f.image, "x.tif");
     o.model = mogi;
     assert!(fails(&o).contains("a map needs a forest (RTM) model; this one is a mogi model"));
-    let mut o = options(&f.image, "x.tif");
+    let mut o = options(&f, &f.image, "x.tif");
     o.window = Some([10, 10, 10, 10]);
     assert!(fails(&o).contains("is not inside the 16×12 image"));
     o.window = None;
@@ -340,8 +341,8 @@ fn the_tiff_crate_behaves_as_described() {
         "write_strip now compresses"
     );
     // 3. `read_image` of a band-interleaved file returns only the first plane.
-    let p = fixture().image.clone();
-    let mut d = Decoder::new(std::fs::File::open(&p).unwrap()).unwrap();
+    let f = fixture();
+    let mut d = Decoder::new(std::fs::File::open(&f.image).unwrap()).unwrap();
     #[allow(deprecated)]
     let DecodingResult::U16(v) = d.read_image().unwrap() else {
         panic!("not u16")

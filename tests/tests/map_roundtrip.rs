@@ -13,6 +13,7 @@
 mod map_common;
 
 use magic_core::{invert_at, Model, Workspace};
+use magic_tests::TempDir;
 use magic_train::data::records::model_channels;
 use magic_train::raster::map::{self, MapOptions};
 use magic_train::raster::pixel::{band_names, N_OUT, N_VARIABLES};
@@ -28,37 +29,43 @@ const LIBRARY_REL: f64 = 1e-5;
 const CSV_REL: f64 = 1e-5;
 const CSV_ABS: f64 = 5e-7;
 
+/// A test's own folder (removed when the test ends) with the model and the scene's image, and
+/// the scene.
 struct Fixture {
-    dir: PathBuf,
+    dir: TempDir,
     model: PathBuf,
-    scene: Scene,
+    scene: &'static Scene,
     image: PathBuf,
 }
 
-fn fixture() -> &'static Fixture {
-    static F: OnceLock<Fixture> = OnceLock::new();
-    F.get_or_init(|| {
-        let dir = tmp("roundtrip");
-        let model = dir.join("C.magic");
-        match std::env::var_os("MAGIC_MAP_MODEL") {
-            Some(m) => std::fs::copy(m, &model).map(|_| ()).unwrap(),
-            None => std::fs::write(&model, small_model(ModelKind::C, 3)).unwrap(),
-        }
-        let scene = Scene::test_split();
-        let image = dir.join("test_split.tif");
-        scene.write(&image, &test_geo());
-        Fixture {
-            dir,
-            model,
-            scene,
-            image,
-        }
-    })
+/// The model (`MAGIC_MAP_MODEL` or a small C trained here) and the scene, made once for all the
+/// tests; each test writes them into a folder of its own.
+fn fixture() -> Fixture {
+    static F: OnceLock<(Vec<u8>, Scene)> = OnceLock::new();
+    let (bytes, scene) = F.get_or_init(|| {
+        let bytes = match std::env::var_os("MAGIC_MAP_MODEL") {
+            Some(m) => std::fs::read(m).unwrap(),
+            None => small_model(ModelKind::C, 3),
+        };
+        (bytes, Scene::test_split())
+    });
+    let dir = TempDir::new("map-roundtrip");
+    let model = dir.join("C.magic");
+    std::fs::write(&model, bytes).unwrap();
+    let image = dir.join("test_split.tif");
+    scene.write(&image, &test_geo());
+    Fixture {
+        dir,
+        model,
+        scene,
+        image,
+    }
 }
 
-fn options(input: &Path, output: &Path, residual: bool) -> MapOptions {
+/// The map of `input` to `output` with `f`'s model.
+fn options(f: &Fixture, input: &Path, output: &Path, residual: bool) -> MapOptions {
     MapOptions {
-        model: fixture().model.clone(),
+        model: f.model.clone(),
         input: input.to_path_buf(),
         output: output.to_path_buf(),
         offset: OFFSET,
@@ -76,13 +83,13 @@ fn options(input: &Path, output: &Path, residual: bool) -> MapOptions {
     }
 }
 
-/// The encoder-only map of the fixture image (the reference the layouts are compared with).
-fn base_map() -> &'static (u32, u32, Vec<Vec<f32>>) {
+/// The encoder-only map of the fixture image (the reference the layouts are compared with),
+/// made once, in `f`'s folder.
+fn base_map(f: &Fixture) -> &'static (u32, u32, Vec<Vec<f32>>) {
     static M: OnceLock<(u32, u32, Vec<Vec<f32>>)> = OnceLock::new();
     M.get_or_init(|| {
-        let f = fixture();
         let out = f.dir.join("base.tif");
-        map::run(&options(&f.image, &out, false)).unwrap();
+        map::run(&options(f, &f.image, &out, false)).unwrap();
         read_map(&out)
     })
 }
@@ -243,11 +250,11 @@ fn check_in_gdal(f: &Fixture, out: &Path) {
 #[test]
 fn map_equals_invert_on_the_test_split_and_opens_in_gdal() {
     let f = fixture();
-    let out = map_through_the_cli(f);
+    let out = map_through_the_cli(&f);
     // The same spectra through `magic invert`.
-    check_against_invert(f, &out);
+    check_against_invert(&f, &out);
     // GDAL: CRS, grid, band names, no-data value.
-    check_in_gdal(f, &out);
+    check_in_gdal(&f, &out);
 }
 
 /// The layouts GDAL writes the fixture image in (name, `gdal_translate` options).
@@ -353,7 +360,7 @@ fn check_band_files(f: &Fixture, base: &[Vec<f32>]) {
         gdal_translate(&f.image, &p, &["-b", &(k + 1).to_string()]);
     }
     let out = f.dir.join("folder_map.tif");
-    map::run(&options(&folder, &out, false)).unwrap();
+    map::run(&options(f, &folder, &out, false)).unwrap();
     same_bits(&read_map(&out).2, base, "folder of bands");
     let reversed = f.dir.join("reversed.tif");
     let mut args = Vec::new();
@@ -367,7 +374,7 @@ fn check_band_files(f: &Fixture, base: &[Vec<f32>]) {
         &args.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
     );
     let out = f.dir.join("reversed_map.tif");
-    let mut o = options(&reversed, &out, false);
+    let mut o = options(f, &reversed, &out, false);
     o.bands = Some(names.iter().rev().cloned().collect());
     map::run(&o).unwrap();
     same_bits(&read_map(&out).2, base, "--bands in reverse order");
@@ -376,33 +383,33 @@ fn check_band_files(f: &Fixture, base: &[Vec<f32>]) {
 #[test]
 fn every_layout_gives_the_same_map() {
     let f = fixture();
-    let base = base_map();
+    let base = base_map(&f);
     for (name, args) in LAYOUTS {
-        let img = f.dir.join(format!("{name}.tif"));
+        let img = f.dir.join(&format!("{name}.tif"));
         gdal_translate(&f.image, &img, args);
-        let out = f.dir.join(format!("{name}_map.tif"));
-        map::run(&options(&img, &out, false)).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+        let out = f.dir.join(&format!("{name}_map.tif"));
+        map::run(&options(&f, &img, &out, false)).unwrap_or_else(|e| panic!("{name}: {e:#}"));
         same_bits(&read_map(&out).2, &base.2, name);
         eprintln!("{name}: same map");
     }
 
     // Float reflectance (NaN = no data), written by the crate's writer.
     let img = f.dir.join("float.tif");
-    write_float_reflectance(f, &img);
+    write_float_reflectance(&f, &img);
     let out = f.dir.join("float_map.tif");
-    map::run(&options(&img, &out, false)).unwrap();
+    map::run(&options(&f, &img, &out, false)).unwrap();
     same_bits(&read_map(&out).2, &base.2, "float reflectance");
 
     // A folder of one file per band, and a file with the bands in another order.
-    check_band_files(f, &base.2);
+    check_band_files(&f, &base.2);
 }
 
 #[test]
 fn a_window_is_the_same_block_on_a_moved_grid() {
     let f = fixture();
-    let base = base_map();
+    let base = base_map(&f);
     let out = f.dir.join("window.tif");
-    let mut o = options(&f.image, &out, false);
+    let mut o = options(&f, &f.image, &out, false);
     o.window = Some([10, 3, 50, 9]);
     map::run(&o).unwrap();
     let (w, h, m) = read_map(&out);
@@ -429,7 +436,7 @@ fn a_window_is_the_same_block_on_a_moved_grid() {
 #[test]
 fn the_scl_masks_its_classes() {
     let f = fixture();
-    let base = base_map();
+    let base = base_map(&f);
     let (w, h) = (f.scene.width, f.scene.height);
     let classes: Vec<u8> = (0..w * h).map(|i| (i % 12) as u8).collect();
     let scl = f.dir.join("scl.tif");
@@ -451,7 +458,7 @@ fn the_scl_masks_its_classes() {
     wr.write_rows(h, &classes).unwrap();
     wr.finish().unwrap();
     let out = f.dir.join("scl_map.tif");
-    let mut o = options(&f.image, &out, false);
+    let mut o = options(&f, &f.image, &out, false);
     o.scl = Some(scl);
     let s = map::run(&o).unwrap();
     let (_, _, m) = read_map(&out);

@@ -5,12 +5,12 @@
 
 use magic_core::mogi::{self, Station};
 use magic_core::{invert, Flags, Model, Variant, Workspace};
-use magic_tests::random_mogi_model;
+use magic_tests::{random_mogi_model, TempDir};
 use magic_train::data::records;
 use magic_train::gnss::synth;
 use magic_train::gnss::tenv3::{self, Reference};
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const N_DAYS: i64 = 30;
 /// A daily displacement read back from the files against the one written (mm): positions are
@@ -23,26 +23,6 @@ const MONTHS: [&str; 12] = [
     "JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT", "NOV", "DEC",
 ];
 const HEADER: &str = "site YYMMMDD yyyy.yyyy __MJD week d reflon _e0(m) __east(m) ____n0(m) _north(m) u0(m) ____up(m) _ant(m) sig_e(m) sig_n(m) sig_u(m) __corr_en __corr_eu __corr_nu _latitude(deg) _longitude(deg) __height(m)";
-
-/// A temporary folder removed on drop (also when the test fails).
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> TempDir {
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos());
-        let p = std::env::temp_dir().join(format!("magic-{tag}-{}-{nanos}", std::process::id()));
-        std::fs::create_dir_all(&p).expect("temp dir");
-        TempDir(p)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 fn day0() -> i64 {
     magic_core::time::days_from_civil(2010, 7, 20)

@@ -21,14 +21,6 @@ pub fn data() -> PathBuf {
     d
 }
 
-/// A fresh temporary folder for one test.
-pub fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("magic-map-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
 /// The `magic` executable of this build (cargo builds it on first use).
 pub fn magic_bin() -> PathBuf {
     magic_tests::magic_bin()

@@ -9,7 +9,7 @@ use magic_train::data::records::{self, ObsRow};
 use magic_train::firmware::qemu_uart::UartQemu;
 use magic_train::firmware::station::{Link, Station};
 use magic_train::gnss::synth;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// Board (f32) against host (f64): largest difference of a variable as a fraction of its
@@ -18,12 +18,6 @@ use std::time::Duration;
 pub const HOST_TOLERANCE: f64 = 1e-4;
 /// Days in the stream (and in [`days`]' file).
 pub const DAYS: usize = 10_000;
-
-pub fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("magic-uart-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// An int8 variant-C model on the Akutan network (random weights, standardisation and
 /// calibration from the synthetic dataset of `seed`), as model-file bytes.
@@ -45,8 +39,8 @@ pub fn model(seed: u64) -> Vec<u8> {
 
 /// `DAYS` observation rows in mm (the synthetic dataset's days, cycled, at 0.1 mm: finer than GNSS
 /// daily noise of about 1 mm, and short lines for the slow emulated UART), written as a
-/// CSV with the network's columns and read back as `magic invert` reads it.
-pub fn days(model: &Model<'_>, name: &str) -> (PathBuf, Vec<ObsRow>) {
+/// CSV `name` in `dir` with the network's columns and read back as `magic invert` reads it.
+pub fn days(model: &Model<'_>, dir: &Path, name: &str) -> (PathBuf, Vec<ObsRow>) {
     let s = synth::generate(synth::Scenario::Clean, 1);
     let d = &s.problem.data;
     let all: Vec<&Vec<f32>> = d
@@ -74,7 +68,7 @@ pub fn days(model: &Model<'_>, name: &str) -> (PathBuf, Vec<ObsRow>) {
         text.push_str(&cells.join(","));
         text.push('\n');
     }
-    let path = temp_dir().join(name);
+    let path = dir.join(name);
     std::fs::write(&path, text).unwrap();
     let rows = records::read_obs(&path, model, false).unwrap();
     assert_eq!(rows.len(), DAYS);
