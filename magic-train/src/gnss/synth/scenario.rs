@@ -159,6 +159,10 @@ pub enum Scenario {
     /// `common_mode` and `seasonal` together.
     #[value(name = "common_mode+seasonal")]
     CommonModeSeasonal,
+    /// Two extra sources: the pulse of `second_source` and the lasting deflation of
+    /// `lasting_deflation_far`, both in the placement's period.
+    #[value(name = "second_source+lasting_source")]
+    TwoSources,
 }
 
 const PULSE: Injection = Injection::SecondSource {
@@ -168,7 +172,7 @@ const PULSE: Injection = Injection::SecondSource {
 
 impl Scenario {
     /// Every scenario, `clean` first, then the single effects, then two effects at once.
-    pub const ALL: [Scenario; 14] = [
+    pub const ALL: [Scenario; 15] = [
         Scenario::Clean,
         Scenario::CommonMode,
         Scenario::Seasonal,
@@ -183,6 +187,7 @@ impl Scenario {
         Scenario::StepElevation,
         Scenario::SecondSourceStep,
         Scenario::CommonModeSeasonal,
+        Scenario::TwoSources,
     ];
 
     /// The scenario's name (the family it injects, `clean`, or the families joined by `+`).
@@ -202,6 +207,7 @@ impl Scenario {
             Scenario::StepElevation => "step+elevation",
             Scenario::SecondSourceStep => "second_source+step",
             Scenario::CommonModeSeasonal => "common_mode+seasonal",
+            Scenario::TwoSources => "second_source+lasting_source",
         }
     }
 
@@ -223,6 +229,7 @@ impl Scenario {
             Scenario::StepElevation => vec![Injection::Step, Injection::Elevation],
             Scenario::SecondSourceStep => vec![PULSE, Injection::Step],
             Scenario::CommonModeSeasonal => vec![Injection::CommonMode, Injection::Seasonal],
+            Scenario::TwoSources => vec![PULSE, source(Shape::Lasting, Distance::Far)],
         }
     }
 
@@ -262,7 +269,7 @@ pub fn list() -> String {
     for sc in Scenario::ALL {
         let fams: Vec<&str> = sc.injections().iter().map(|i| i.family()).collect();
         s += &format!(
-            "{:<24} {:<26} {:<9} {}\n",
+            "{:<29} {:<29} {:<9} {}\n",
             sc.name(),
             if fams.is_empty() {
                 "-".to_string()
@@ -302,6 +309,7 @@ mod tests {
             Scenario::StepElevation,
             Scenario::SecondSourceStep,
             Scenario::CommonModeSeasonal,
+            Scenario::TwoSources,
         ] {
             let fams: Vec<&str> = sc.injections().iter().map(|i| i.family()).collect();
             assert_eq!(fams.join("+"), sc.name());

@@ -190,28 +190,46 @@ fn datasets_are_standardised_and_repeatable() {
     }
 }
 
+/// Two effects at once — of different kinds, or two extra sources — are the sum of each alone,
+/// with the same parameters.
 #[test]
 fn two_effects_are_the_sum_of_each_alone() {
+    let pairs = [
+        (
+            Scenario::StepElevation,
+            [Scenario::Step, Scenario::Elevation],
+        ),
+        (
+            Scenario::TwoSources,
+            [Scenario::SecondSource, Scenario::LastingDeflationFar],
+        ),
+    ];
     for noise in NoiseModel::ALL {
-        let spec = Spec::new(Scenario::StepElevation, 2).noise(noise);
-        let (both, t) = added(spec);
-        let (step, ts) = added(Spec {
-            scenario: Scenario::Step,
-            ..spec
-        });
-        let (elev, te) = added(Spec {
-            scenario: Scenario::Elevation,
-            ..spec
-        });
-        assert_eq!(injected(&t), [injected(&ts), injected(&te)].concat());
-        assert!(
-            t.get("effect").is_none(),
-            "a single `effect` only for one effect"
-        );
-        for (t, row) in both.iter().enumerate() {
-            for c in 0..row.len() {
-                let e = row[c] - step[t][c] - elev[t][c];
-                assert!(e.abs() < 3.0 * MM_TOL, "{noise:?} day {t} channel {c}: {e}");
+        for (sc, [one, other]) in pairs {
+            let spec = Spec::new(sc, 2).noise(noise).placed(SplitName::Valid);
+            let (both, t) = added(spec);
+            let (a, ta) = added(Spec {
+                scenario: one,
+                ..spec
+            });
+            let (b, tb) = added(Spec {
+                scenario: other,
+                ..spec
+            });
+            assert_eq!(injected(&t), [injected(&ta), injected(&tb)].concat());
+            assert!(
+                t.get("effect").is_none(),
+                "a single `effect` only for one effect"
+            );
+            for (t, row) in both.iter().enumerate() {
+                for c in 0..row.len() {
+                    let e = row[c] - a[t][c] - b[t][c];
+                    assert!(
+                        e.abs() < 3.0 * MM_TOL,
+                        "{noise:?} {} day {t} channel {c}: {e}",
+                        sc.name()
+                    );
+                }
             }
         }
     }
