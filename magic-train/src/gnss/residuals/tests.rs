@@ -277,6 +277,17 @@ fn the_free_view_is_the_held_view_projected() {
     assert!(free.with_fit(free.fit.r.clone()).held.is_none());
 }
 
+/// Per channel, the least-squares coefficients of 1, the annual sine and cosine over `days`.
+fn annual(r: &[f64], days: &[f64], nc: usize) -> Vec<Vec<f64>> {
+    let w = std::f64::consts::TAU / 365.25;
+    let basis = |d: f64, b: &mut [f64]| {
+        b[0] = 1.0;
+        b[1] = (w * d).sin();
+        b[2] = (w * d).cos();
+    };
+    crate::gnss::families::dated::fit_basis(r, days, nc, 3, &basis)
+}
+
 /// An annual term along the main source's field, off the network's translations: the
 /// projection takes it off every day, the rows given back hold it whole (a least-squares sine
 /// per channel recovers it). Of an annual network translation, part of it in the span, the
@@ -314,12 +325,7 @@ fn the_rows_given_back_hold_a_term_in_the_span() {
         .collect();
     let shared = plain(&network, &scale, &days);
     let res = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
-    let basis = |d: f64, b: &mut [f64]| {
-        b[0] = 1.0;
-        b[1] = (w * d).sin();
-        b[2] = (w * d).cos();
-    };
-    let fitted = |r: &[f64]| crate::gnss::families::dated::fit_basis(r, &days, nc, 3, &basis);
+    let fitted = |r: &[f64]| annual(r, &days, nc);
     let back = res.given_back().expect("the data's own residuals");
     assert_eq!(back.days, res.fit.days);
     let (got, lost) = (fitted(&back.r), fitted(&res.fit.r));
@@ -343,9 +349,6 @@ fn the_rows_given_back_hold_a_term_in_the_span() {
     assert!(res.with_fit(res.fit.r.clone()).given_back().is_none());
 }
 
-/// A day whose encoder put the main source deep and at its volume bound, with a network
-/// translation in the data: the refit finds the source where the data put it, the translation
-/// fitted beside it.
 /// With the common mode declared (the translations in F's tangent), the projection takes an
 /// annual network translation off whole: the rows given back whole hold it again (a station's
 /// annual amplitude, whichever effect the loop declared first), the rows given back keep only
@@ -381,11 +384,7 @@ fn the_rows_given_back_hold_a_declared_translations_annual_term() {
         .collect();
     let shared = plain(&network, &scale, &days);
     let res = view(&shared, &rows, orthonormal(&columns, 1e-9, 1));
-    let basis = |d: f64, b: &mut [f64]| {
-        b[0] = 1.0;
-        b[1] = (w * d).sin();
-    };
-    let fitted = |r: &[f64]| crate::gnss::families::dated::fit_basis(r, &days, nc, 2, &basis);
+    let fitted = |r: &[f64]| annual(r, &days, nc);
     let back = fitted(&res.given_back_whole().expect("the common mode declared").r);
     let projected = fitted(&res.given_back().expect("the data's own residuals").r);
     for c in 0..nc {
@@ -414,6 +413,9 @@ fn the_rows_given_back_hold_a_declared_translations_annual_term() {
     assert!(without.given_back_whole().is_none());
 }
 
+/// A day whose encoder put the main source deep and at its volume bound, with a network
+/// translation in the data: the refit finds the source where the data put it, the translation
+/// fitted beside it.
 #[test]
 fn a_deep_encoder_source_is_refitted_where_the_data_put_it() {
     let network = Network::akutan();
