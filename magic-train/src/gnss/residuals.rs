@@ -189,20 +189,22 @@ impl GnssResiduals {
     }
 
     /// The rows [`GnssResiduals::given_back`] with the translations' part given back too, when
-    /// F declares them (the common mode; else `None`, as for a draw). The declared common mode's
-    /// daily translation then holds the network's share of every station's annual term: what a
-    /// station's annual amplitude is, whichever of the two effects was declared first. It is not
-    /// what F's seasonal term should hold beside it: the encoder, which does not see the date,
-    /// puts the network's share in its translation (declared there too, trial seeds 101–105
-    /// under `red`, `common_mode+seasonal`: B's test MSE after the loop 0.01–0.04 higher).
+    /// F declares them (the common mode, by the rule its family declares it by:
+    /// [`latent::declared`](crate::gnss::families::latent::declared); else `None`, as for a
+    /// draw). The declared common mode's daily translation then holds the network's share of
+    /// every station's annual term: what a station's annual amplitude is, whichever of the two
+    /// effects was declared first. It is not what F's seasonal term should hold beside it: the
+    /// encoder, which does not see the date, puts the network's share in its translation
+    /// (declared there too, trial seeds 101–105 under `red`, `common_mode+seasonal`: B's test
+    /// MSE after the loop 0.01–0.04 higher).
     pub fn given_back_whole(&self) -> Option<Block> {
-        let declared = translation_basis(&self.ctx.scale, self.ns())
+        let projected: Vec<Vec<f64>> = translation_basis(&self.ctx.scale, self.ns())
             .iter()
-            .all(|t| {
-                let p = self.project(t);
-                dot(&p, &p) < TRANSLATIONS_DECLARED
-            });
-        declared.then(|| self.give_back(&[])).flatten()
+            .map(|t| self.project(t))
+            .collect();
+        crate::gnss::families::latent::declared(&projected)
+            .then(|| self.give_back(&[]))
+            .flatten()
     }
 
     /// The analysed rows plus what the projection took, less its part along the orthonormal
@@ -340,10 +342,6 @@ fn invert_split(
             .collect::<Result<_>>()?;
     Ok((days, rows))
 }
-
-/// Squared norm below which a unit translation (standardised units) lies in F's tangent: F
-/// declares the common mode ([`GnssResiduals::given_back_whole`]).
-const TRANSLATIONS_DECLARED: f64 = 1e-9;
 
 /// Residuals (observation − F(E(x)), standardised) of every day of `splits`, in time order, with
 /// the tangent space of F at the main source's typical position.
