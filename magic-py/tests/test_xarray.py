@@ -58,6 +58,14 @@ def test_numpy_backed(forest, cube):
     assert np.isnan(ds["LAI"].values[0, 0])
 
 
+def test_units_of_the_result_columns():
+    units = magic.xarray.units
+    assert units("depth_km") == "km" and units("cab") == "ug cm-2"
+    assert units("dv_1e6m3") == units("dv3_1e6m3") == "1e6 m3"
+    assert units("cm_u_mm") == "mm" and units("elev_mm_per_km") == "mm km-1"
+    assert units("LAI") is None and units("N") is None
+
+
 def test_bands_are_matched_by_name(forest, cube):
     model = magic.Model.load(forest)
     shuffled = cube.isel(band=list(reversed(range(11))))

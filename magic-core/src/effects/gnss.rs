@@ -262,6 +262,30 @@ mod tests {
     }
 
     #[test]
+    fn two_extra_sources_each_take_their_own_volume() {
+        let at = |x_km, y_km, depth_km| Effect::SecondSource {
+            x_km,
+            y_km,
+            depth_km,
+        };
+        let (a, b) = (at(4.0, -1.0, 3.0), at(-6.0, 5.0, 5.0));
+        // Main source off (ΔV 0); then each extra source alone, and both.
+        let run = |effects: &[Effect<'_>], latent: &[f64]| {
+            let mut p = [0.0, 0.0, 5.0, 0.0, 0.0, 0.0];
+            p[4..4 + latent.len()].copy_from_slice(latent);
+            let mut out = [0.0f64; 6];
+            mogi_with_effects(&NET, effects, &p[..4 + latent.len()], f64::NAN, &mut out).unwrap();
+            out
+        };
+        let (ua, ub) = (run(&[a], &[1.5]), run(&[b], &[-2.0]));
+        let both = run(&[a, b], &[1.5, -2.0]);
+        for i in 0..6 {
+            assert_eq!(both[i], ua[i] + ub[i], "channel {i}");
+        }
+        assert!(ua.iter().chain(&ub).all(|&u| u != 0.0));
+    }
+
+    #[test]
     fn time_effects_need_a_date() {
         let rate = [0u8; 24];
         let e = Effect::Drift {

@@ -33,6 +33,18 @@ UNITS = {
 }
 
 
+#: Units of the result columns named by their unit (GNSS effects' latent variables:
+#: ``cm_e_mm``, ``elev_mm_per_km``, ``dv2_1e6m3``, …), by the name's ending.
+UNIT_SUFFIXES = (("_mm_per_km", "mm km-1"), ("_1e6m3", "1e6 m3"), ("_mm", "mm"))
+
+
+def units(column: str) -> str | None:
+    """The units of a result column, ``None`` for a dimensionless one (``N``, ``LAI``, …)."""
+    if column in UNITS:
+        return UNITS[column]
+    return next((u for end, u in UNIT_SUFFIXES if column.endswith(end)), None)
+
+
 def _dtype(column: str) -> np.dtype:
     if column == "flags":
         return np.dtype(np.uint8)
@@ -169,8 +181,8 @@ def invert(
     )
     ds = xr.Dataset({c: r for c, r in zip(outputs, results)})
     for c in outputs:
-        if c in UNITS:
-            ds[c].attrs["units"] = UNITS[c]
+        if (u := units(c)) is not None:
+            ds[c].attrs["units"] = u
     ds["flags"].attrs["flag_masks"] = np.array([1, 2, 4], dtype=np.uint8)
     ds["flags"].attrs["flag_meanings"] = "at_bound missing_channels high_residual"
     ds.attrs["magic_problem"] = model.problem

@@ -114,25 +114,43 @@ pub fn result_header(model: &Model<'_>, with_date: bool) -> String {
 /// then the latent variables of each declared effect — then `residual_rms`, `flags`,
 /// `stations_used`.
 pub fn result_columns(model: &Model<'_>) -> Vec<String> {
-    use magic_core::effects::Effect;
     let mut names: Vec<String> = match (&model.problem, model.variant) {
         (Problem::Mogi { .. }, _) => magic_core::mogi::PARAM_NAMES.map(String::from).to_vec(),
         (Problem::Rtm { .. }, magic_core::Variant::A) => (0..7).map(|i| format!("z{i}")).collect(),
         (Problem::Rtm { .. }, _) => RTM_RESULT_NAMES.map(String::from).to_vec(),
     };
     if let Problem::Mogi { .. } = model.problem {
-        for e in &model.effects {
-            let latent: &[&str] = match e {
-                Effect::CommonMode => &["cm_e_mm", "cm_n_mm", "cm_u_mm"],
-                Effect::Elevation { .. } => &["elev_mm_per_km"],
-                Effect::SecondSource { .. } => &["dv2_1e6m3"],
-                _ => &[],
-            };
-            names.extend(latent.iter().map(|s| s.to_string()));
-        }
+        names.extend(latent_columns(model.effects.iter().map(|e| e.family())));
     }
     names.extend(["residual_rms", "flags", "stations_used"].map(String::from));
     names
+}
+
+/// The columns of the latent variables of GNSS effects of `families`, in order: a common
+/// mode's `cm_e_mm`, `cm_n_mm`, `cm_u_mm`, an elevation term's `elev_mm_per_km`, and each
+/// extra source's volume change, `dv2_1e6m3` for the first (the main source's is `dv_1e6m3`),
+/// `dv3_1e6m3` for the next, and so on. Effects without latent variables have no column.
+///
+/// ```
+/// use magic_train::data::records::latent_columns;
+/// let cols = latent_columns(["second_source", "common_mode", "step", "second_source"]);
+/// assert_eq!(cols, ["dv2_1e6m3", "cm_e_mm", "cm_n_mm", "cm_u_mm", "dv3_1e6m3"]);
+/// ```
+pub fn latent_columns<'a>(families: impl IntoIterator<Item = &'a str>) -> Vec<String> {
+    let mut sources = 0;
+    let mut out = Vec::new();
+    for f in families {
+        match f {
+            "common_mode" => out.extend(["cm_e_mm", "cm_n_mm", "cm_u_mm"].map(String::from)),
+            "elevation" => out.push("elev_mm_per_km".into()),
+            "second_source" => {
+                sources += 1;
+                out.push(format!("dv{}_1e6m3", sources + 1));
+            }
+            _ => {}
+        }
+    }
+    out
 }
 
 /// The standard-deviation columns `magic invert --sd` appends: `<variable>_sd` for each of the

@@ -10,6 +10,7 @@
 use super::lsq::{self, Grid, Options, Problem};
 use super::plausibility::plausible;
 use super::GnssProblem;
+use crate::data::records::latent_columns;
 use crate::data::{day_number, SplitName};
 use crate::model::OwnedEffect;
 use crate::numerics::median;
@@ -250,9 +251,7 @@ fn summarise(
         .map(|&i| (i, running(i, 3)))
         .max_by(|a, b| a.1.total_cmp(&b.1));
     let mut param_names: Vec<String> = PARAM_NAMES.iter().map(|s| s.to_string()).collect();
-    for e in effects {
-        param_names.extend(latent_names(e));
-    }
+    param_names.extend(latent_columns(effects.iter().map(OwnedEffect::family)));
     debug_assert_eq!(param_names.len(), n_unknowns);
     Ok(ClassicalResult {
         split: split.to_string(),
@@ -274,16 +273,6 @@ fn summarise(
         seconds: t0.elapsed().as_secs_f64(),
         days,
     })
-}
-
-/// Column names of an effect's latent variables.
-pub fn latent_names(e: &OwnedEffect) -> Vec<String> {
-    match e {
-        OwnedEffect::CommonMode => vec!["cm_e_mm".into(), "cm_n_mm".into(), "cm_u_mm".into()],
-        OwnedEffect::Elevation { .. } => vec!["elev_mm_per_km".into()],
-        OwnedEffect::SecondSource { .. } => vec!["dv2_1e6m3".into()],
-        _ => vec![],
-    }
 }
 
 /// Parses a start grid `NX,NY,ND,KEEP` (e.g. `12,12,10,8`).
