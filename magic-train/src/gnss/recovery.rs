@@ -258,15 +258,38 @@ pub fn compare(family: &str, tp: &serde_json::Value, p: &serde_json::Value) -> (
     }
 }
 
-/// How `e` was recovered among `ranked` (best first). A significant candidate declaring its term
-/// ([`same_effect`]: a second source found as a change that stays is the source the loop adds)
-/// finds it with its parameters right: the first such one, else the first significant one
-/// declaring its term, else its own family's candidate is judged.
-fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
+/// Which candidate of `ranked` (best first) recovers each injected effect: a significant
+/// candidate declaring its term ([`same_effect`]: a second source found as a change that stays
+/// is the source the loop adds) with its parameters right, each candidate recovering at most
+/// one effect — two injected sources within the position tolerance of one candidate are one
+/// found, not two. Its own family's candidate first, then one of another family declaring the
+/// same term (a pulse found as a change that stays), each in rank order.
+fn assign(effects: &[Injected], ranked: &[&Candidate]) -> Vec<Option<usize>> {
+    let mut taken = vec![None; effects.len()];
+    for own in [true, false] {
+        for (i, e) in effects.iter().enumerate() {
+            if taken[i].is_some() {
+                continue;
+            }
+            taken[i] = (0..ranked.len()).find(|&k| {
+                let c = ranked[k];
+                c.significant
+                    && (c.family == e.family) == own
+                    && same_effect(&c.family, &e.family)
+                    && !taken.contains(&Some(k))
+                    && compare(&e.family, &e.params, &c.params).0
+            });
+        }
+    }
+    taken
+}
+
+/// How `e` was recovered among `ranked`: by the candidate [`assign`] gave it (`given`), else
+/// the first significant one declaring its term, else its own family's candidate is judged —
+/// not found, and said so where that candidate recovers another injected effect.
+fn found(e: &Injected, ranked: &[&Candidate], given: Option<usize>, taken: &[usize]) -> Found {
     let declares = |c: &&Candidate| c.significant && same_effect(&c.family, &e.family);
-    let pos = ranked
-        .iter()
-        .position(|c| declares(c) && compare(&e.family, &e.params, &c.params).0)
+    let pos = given
         .or_else(|| ranked.iter().position(declares))
         .or_else(|| ranked.iter().position(|c| c.family == e.family));
     let Some(c) = pos.map(|i| ranked[i]) else {
@@ -280,12 +303,15 @@ fn found(e: &Injected, ranked: &[&Candidate]) -> Found {
             at_truth: None,
         };
     };
-    let (params_ok, detail) = compare(&e.family, &e.params, &c.params);
+    let (params_ok, mut detail) = compare(&e.family, &e.params, &c.params);
+    if given.is_none() && pos.is_some_and(|k| taken.contains(&k)) {
+        detail.push_str(" (recovers another injected effect)");
+    }
     Found {
         family: e.family.clone(),
         significant: c.significant,
         rank: pos.map(|i| i + 1),
-        params_ok,
+        params_ok: params_ok && (given.is_some() || !c.significant),
         detail: if c.family == e.family {
             detail
         } else {
@@ -339,7 +365,15 @@ pub fn recovery(truth: &serde_json::Value, candidates: &[Candidate]) -> Recovery
             .to_string(),
         seed: truth.get("seed").and_then(|v| v.as_u64()).unwrap_or(0),
         top: ranked.first().map_or(String::new(), |c| c.family.clone()),
-        effects: effects.iter().map(|e| found(e, &ranked)).collect(),
+        effects: {
+            let given = assign(&effects, &ranked);
+            let taken: Vec<usize> = given.iter().flatten().copied().collect();
+            effects
+                .iter()
+                .zip(&given)
+                .map(|(e, &pos)| found(e, &ranked, pos, &taken))
+                .collect()
+        },
         false_additions: significant(&|c| {
             c.effect.is_some()
                 && !effects.iter().any(|e| same_effect(&e.family, &c.family))

@@ -233,3 +233,31 @@ fn a_source_found_as_the_other_time_course_is_found() {
         "{r:?}"
     );
 }
+
+#[test]
+fn one_candidate_recovers_one_of_two_injected_sources() {
+    let at = |x: f64, y: f64| json!({"x_km": x, "y_km": y, "depth_km": 4.0});
+    let truth = json!({"scenario": "second_source+lasting_source", "noise": "red",
+        "placement": "valid", "effects": [{"family": "second_source", "params": at(8.4, -0.4)},
+        {"family": "lasting_source", "params": at(9.0, -2.3)}], "background": []});
+    // One lasting source between the two, within 2 km of each: it recovers the deflation
+    // (its own family first); the pulse's candidate is elsewhere.
+    let between = cand("lasting_source", true, at(8.9, -1.3));
+    let r = recovery(
+        &truth,
+        &[between.clone(), cand("second_source", true, at(2.0, 5.0))],
+    );
+    assert!(r.effects[1].found() && !r.effects[0].found(), "{r:?}");
+    assert!(
+        r.effects[0]
+            .detail
+            .ends_with("(recovers another injected effect)"),
+        "{r:?}"
+    );
+    // With the pulse located too, both are found.
+    let r = recovery(
+        &truth,
+        &[between, cand("second_source", true, at(8.0, 0.2))],
+    );
+    assert!(r.all_found(), "{r:?}");
+}
