@@ -270,8 +270,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                 rounds: opts.max_rounds,
             };
         }
-        let declared: Vec<&str> = effects.iter().map(OwnedEffect::family).collect();
-        match analysis.top_declarable(&declared) {
+        match analysis.top_declarable(&effects, opts.analysis.extra_sources) {
             Some(cand) => {
                 effects.extend(cand.effect.clone());
                 added = Some(cand.clone());

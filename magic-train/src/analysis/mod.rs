@@ -20,6 +20,7 @@ pub use family::{judge, surrogate_seeds, DynFamily, Family};
 pub use rejection::{Rejection, Side};
 
 use crate::data::SplitName;
+use crate::model::OwnedEffect;
 use crate::problem::Problem;
 use anyhow::Result;
 use magic_core::{Model, Variant};
@@ -61,6 +62,11 @@ pub struct AnalysisOptions {
     pub bootstrap: usize,
     /// The volcano's main source, free to move or held in place.
     pub main_source: MainSource,
+    /// The volcano: the most extra sources F may hold. Where F holds fewer, a new source must
+    /// be told from the declared ones and from their trade with the main source
+    /// ([`Context::sources_span`](crate::gnss::residuals::Context::sources_span)); the loop
+    /// adds none beyond it.
+    pub extra_sources: usize,
 }
 
 impl Default for AnalysisOptions {
@@ -72,6 +78,7 @@ impl Default for AnalysisOptions {
             seed: 0,
             bootstrap: 20,
             main_source: MainSource::Free,
+            extra_sources: 1,
         }
     }
 }
@@ -113,20 +120,31 @@ pub struct Analysis {
 
 impl Analysis {
     /// The most significant candidate that can be added to F and whose effect F does not
-    /// declare yet (`declared`: the families of F's effects, [`OwnedEffect::family`]). The
-    /// effect's family, not the candidate's, decides: two candidate families may declare the
-    /// same term (a second source found as an episode or as a change that stays), and F holds
-    /// one term of each kind — a second copy would buy the encoder another free variable for
-    /// whatever the first one left, not a second effect.
-    ///
-    /// [`OwnedEffect::family`]: crate::model::OwnedEffect::family
-    pub fn top_declarable(&self, declared: &[&str]) -> Option<&Candidate> {
-        self.effects.iter().find(|c| {
-            c.significant
-                && c.effect
-                    .as_ref()
-                    .is_some_and(|e| !declared.contains(&e.family()))
-        })
+    /// declare yet (`declared`: F's effects). The effect, not the candidate's family, decides
+    /// ([`OwnedEffect::same_term`]): two candidate families may declare the same term (a second
+    /// source found as an episode or as a change that stays), and a source found again where F
+    /// has one would buy the encoder another free variable for whatever the first one left, not
+    /// a second effect. A source elsewhere is another term, taken while F holds fewer than
+    /// `extra_sources`. F holds at most [`MAX_EFFECTS`](magic_core::effects::MAX_EFFECTS)
+    /// effects.
+    pub fn top_declarable(
+        &self,
+        declared: &[OwnedEffect],
+        extra_sources: usize,
+    ) -> Option<&Candidate> {
+        if declared.len() >= magic_core::effects::MAX_EFFECTS {
+            return None;
+        }
+        let is_source = |e: &OwnedEffect| matches!(e, OwnedEffect::SecondSource { .. });
+        let sources = declared.iter().filter(|e| is_source(e)).count();
+        let new_term = |e: &OwnedEffect| {
+            let again = declared.iter().any(|d| d.same_term(e));
+            let full = is_source(e) && sources >= extra_sources;
+            !(again || full)
+        };
+        self.effects
+            .iter()
+            .find(|c| c.significant && c.effect.as_ref().is_some_and(new_term))
     }
 
     /// The JSON report (`{"effects": [{"family", "variance_explained", "chance_level",
@@ -245,7 +263,6 @@ pub fn effects_chart(path: &Path, title: &str, effects: &[Candidate]) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::OwnedEffect;
 
     fn significant(family: &str, score: f64, effect: OwnedEffect) -> Candidate {
         let noise = vec![0.010, 0.012, 0.008, 0.011, 0.009, 0.010, 0.013, 0.007];
@@ -255,7 +272,7 @@ mod tests {
     }
 
     #[test]
-    fn a_declared_term_is_not_added_again_under_another_family() {
+    fn a_declared_term_is_not_added_again_but_a_source_elsewhere_is() {
         let source = OwnedEffect::SecondSource {
             x_km: 1.0,
             y_km: -2.0,
@@ -273,9 +290,45 @@ mod tests {
             summary: String::new(),
             seconds: 0.0,
         };
-        let top = |declared: &[&str]| analysis.top_declarable(declared).map(|c| c.family.clone());
+        let top = |declared: &[OwnedEffect]| {
+            analysis
+                .top_declarable(declared, 2)
+                .map(|c| c.family.clone())
+        };
+        let near = OwnedEffect::SecondSource {
+            x_km: 2.0,
+            y_km: -2.5,
+            depth_km: 4.5,
+        };
+        let far = OwnedEffect::SecondSource {
+            x_km: 6.0,
+            y_km: 3.0,
+            depth_km: 4.0,
+        };
         assert_eq!(top(&[]).as_deref(), Some("lasting_source"));
-        assert_eq!(top(&["second_source"]).as_deref(), Some("common_mode"));
-        assert_eq!(top(&["second_source", "common_mode"]), None);
+        assert_eq!(
+            top(std::slice::from_ref(&near)).as_deref(),
+            Some("common_mode")
+        );
+        assert_eq!(top(&[near.clone(), OwnedEffect::CommonMode]), None);
+        // A source 7 km from the declared one is a second term.
+        assert_eq!(
+            top(std::slice::from_ref(&far)).as_deref(),
+            Some("lasting_source")
+        );
+        // With one extra source allowed, F's one is the only one.
+        let one = analysis.top_declarable(std::slice::from_ref(&far), 1);
+        assert_eq!(one.map(|c| c.family.as_str()), Some("common_mode"));
+        // F is full.
+        let full = [far, OwnedEffect::Elevation { z_ref_km: 0.1 }];
+        assert_eq!(
+            top(&[
+                full[0].clone(),
+                full[1].clone(),
+                full[1].clone(),
+                full[1].clone()
+            ]),
+            None
+        );
     }
 }

@@ -47,9 +47,20 @@ pub enum Rejection {
     /// A source whose field is mostly what a move of the main source produces: the share of it
     /// no such move can produce is below the least that tells the two apart.
     Unresolvable {
-        /// The share of its field (in norm) beyond the main source's span.
+        /// The share of its field (in norm) beyond the main source's span (and the declared
+        /// sources' fields).
         share: f64,
         /// The least share accepted.
+        least: f64,
+        /// F declares extra sources, whose fields the span holds too.
+        beside_declared: bool,
+    },
+    /// F declares an extra source the main source trades with (its field mostly in the main
+    /// source's span): a source beside them is not told from their trade.
+    BesideTrade {
+        /// The declared source's share of its field (in norm) beyond the main source's span.
+        share: f64,
+        /// The least share beside which another source is taken.
         least: f64,
     },
     /// Its fit over the whole record, the one F would take, adds nothing (a drift whose
@@ -104,10 +115,24 @@ impl fmt::Display for Rejection {
                 "detection statistic {statistic:.3} not above the surrogates' largest, \
                  {largest:.3}"
             ),
-            Rejection::Unresolvable { share, least } => write!(
+            Rejection::Unresolvable {
+                share,
+                least,
+                beside_declared,
+            } => write!(
                 f,
-                "its field mostly a move of the main source ({share:.2} of it beyond, at least \
-                 {least:.2} needed)"
+                "its field mostly a move of the main source{} ({share:.2} of it beyond, at least \
+                 {least:.2} needed)",
+                if *beside_declared {
+                    " and a change of the declared sources"
+                } else {
+                    ""
+                }
+            ),
+            Rejection::BesideTrade { share, least } => write!(
+                f,
+                "beside a declared source the main source trades with ({share:.2} of its field \
+                 beyond the main source's span, at least {least:.2} needed for another)"
             ),
             Rejection::NothingToAdd(why) => write!(f, "nothing to add: {why}"),
             Rejection::PartOf(why) => f.write_str(why),
@@ -155,6 +180,7 @@ mod tests {
         let near = Rejection::Unresolvable {
             share: 0.13,
             least: 0.25,
+            beside_declared: false,
         };
         assert_eq!(near.bound(), None);
         assert_eq!(

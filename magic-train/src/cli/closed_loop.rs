@@ -33,6 +33,11 @@ pub struct LoopCmd {
     /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
+    /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
+    /// first only where the main source does not trade with that one; measured in the README,
+    /// *A second source term in F*).
+    #[arg(long, default_value_t = 1)]
+    extra_sources: usize,
     /// Report folder (Markdown, JSON, PNG, the rounds' model files).
     #[arg(long, default_value = "out/loop")]
     report: PathBuf,
@@ -62,6 +67,7 @@ pub fn run(a: &LoopCmd) -> Result<()> {
             analysis: AnalysisOptions {
                 surrogates: a.surrogates,
                 main_source: a.main_source,
+                extra_sources: a.extra_sources,
                 ..AnalysisOptions::default()
             },
         };

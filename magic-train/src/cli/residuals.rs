@@ -37,6 +37,11 @@ pub struct ResidualsCmd {
     /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
+    /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
+    /// first only where the main source does not trade with that one; measured in the README,
+    /// *A second source term in F*).
+    #[arg(long, default_value_t = 1)]
+    extra_sources: usize,
     #[command(flatten)]
     json: JsonOut,
     /// Write the analysis' figures (PNG) into this folder.
@@ -54,6 +59,7 @@ pub fn run(a: &ResidualsCmd) -> Result<()> {
         surrogates: a.surrogates,
         seed: a.seed,
         main_source: a.main_source,
+        extra_sources: a.extra_sources,
         ..AnalysisOptions::default()
     };
     let p = a.data.problem_of(&m)?;

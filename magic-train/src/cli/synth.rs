@@ -232,6 +232,11 @@ pub struct SynthLoopCmd {
     /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
+    /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
+    /// first only where the main source does not trade with that one; measured in the README,
+    /// *A second source term in F*).
+    #[arg(long, default_value_t = 1)]
+    extra_sources: usize,
     /// Folder for each run's loop report (and the tables).
     #[arg(long, default_value = "out/synth-loop")]
     out: PathBuf,
@@ -274,6 +279,7 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
             baseline: false,
             analysis: AnalysisOptions {
                 main_source: a.main_source,
+                extra_sources: a.extra_sources,
                 ..AnalysisOptions::default()
             },
         };

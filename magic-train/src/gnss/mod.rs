@@ -271,7 +271,13 @@ impl Problem for GnssProblem {
         SplitName::ALL.to_vec()
     }
     fn residuals(&self, model: &Model<'_>, opts: &AnalysisOptions) -> Result<GnssResiduals> {
-        residuals::residuals(self, model, &opts.splits_for(self), opts.main_source)
+        residuals::residuals(
+            self,
+            model,
+            &opts.splits_for(self),
+            opts.main_source,
+            opts.extra_sources,
+        )
     }
     fn families(&self) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
         families::all()

@@ -28,6 +28,7 @@ use super::{lsq, GnssProblem, Network};
 use crate::analysis::projection::{orthonormal, project, scaled};
 use crate::analysis::MainSource;
 use crate::data::SplitName;
+use crate::gnss::families::second_source::MIN_RESOLVABLE_DECLARED;
 use crate::model::OwnedEffect;
 use crate::numerics::median;
 use crate::problem::Problem as _;
@@ -52,6 +53,24 @@ pub struct SourceGrid {
 
 /// The main source's variables (x, y, depth, volume change): the first of every GNSS model.
 const SOURCE_VARIABLES: usize = 4;
+
+/// The share (in norm) of `v` beyond the span of the orthonormal `basis`; 0 for a zero `v`.
+///
+/// ```
+/// use magic_train::gnss::residuals::share_beyond;
+/// let basis = [vec![1.0, 0.0, 0.0]];
+/// assert_eq!(share_beyond(&basis, &[3.0, 4.0, 0.0]), 0.8);
+/// assert_eq!(share_beyond(&basis, &[0.0; 3]), 0.0);
+/// ```
+pub fn share_beyond(basis: &[Vec<f64>], v: &[f64]) -> f64 {
+    let norm2 = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+    let n = norm2(v);
+    if n > 0.0 {
+        (norm2(&project(basis, v)) / n).sqrt()
+    } else {
+        0.0
+    }
+}
 
 /// Least share (squared norm) of each direction of the main source's span that must lie off the
 /// nuisances (translations, declared latent effects) for the source to be held in place (see
@@ -106,6 +125,15 @@ pub struct Context {
     /// state — its position, depth and volume, whether the analysis holds it or not: what a
     /// second source's field must not be mostly made of to be told from a move of it.
     pub source_span: Vec<Vec<f64>>,
+    /// Orthonormal basis of [`Context::source_span`] and the fields of the extra sources F
+    /// declares: what a new source's field must not be mostly made of to be told from a move
+    /// of the main source and a change of the declared ones (a declared source found again
+    /// lies entirely in it).
+    pub sources_span: Vec<Vec<f64>>,
+    /// The smallest share of a declared extra source's field (in norm) beyond
+    /// [`Context::source_span`], where it is below [`MIN_RESOLVABLE_DECLARED`]: the main source
+    /// trades with that source, and no other source is told from the trade.
+    pub trading: Option<f64>,
     /// Sum of squares of the analysed days' (real) residuals: the denominator of the latent
     /// families' shares, for the data and its surrogates alike.
     pub total_fit: f64,
@@ -344,12 +372,15 @@ fn invert_split(
 }
 
 /// Residuals (observation − F(E(x)), standardised) of every day of `splits`, in time order, with
-/// the tangent space of F at the main source's typical position.
+/// the tangent space of F at the main source's typical position. `extra_sources`: the most
+/// extra sources F may hold; while it holds fewer, a new source must be told from the declared
+/// ones ([`Context::sources_span`], [`Context::trading`]).
 pub fn residuals(
     p: &GnssProblem,
     model: &Model<'_>,
     splits: &[SplitName],
     mode: MainSource,
+    extra_sources: usize,
 ) -> Result<GnssResiduals> {
     let nc = p.data.n_obs();
     if model.n_obs() != nc {
@@ -399,12 +430,37 @@ pub fn residuals(
         })
         .collect::<Result<_>>()?;
     let k = SOURCE_VARIABLES.min(columns.len());
+    let mut declared = Vec::new();
+    let mut j = mogi::N_PARAMS;
+    for e in &model.effects {
+        if let magic_core::effects::Effect::SecondSource { .. } = e {
+            declared.push(j);
+        }
+        j += e.n_latent();
+    }
+    let source_span = orthonormal(&columns[..k], 1e-9, 1);
+    // With F holding as many extra sources as it may, no new one is told apart from them.
+    let open = declared.len() < extra_sources;
+    let declared: Vec<&(Vec<f64>, f64)> = declared
+        .iter()
+        .filter_map(|&j| columns.get(j))
+        .filter(|_| open)
+        .collect();
+    let trading = declared
+        .iter()
+        .map(|(c, _)| share_beyond(&source_span, c))
+        .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.min(v))))
+        .filter(|&v| v < MIN_RESOLVABLE_DECLARED);
+    let mut sources = columns[..k].to_vec();
+    sources.extend(declared.into_iter().cloned());
     let shared = Shared {
         network: &p.network,
         scale,
         mse,
         main,
-        source_span: orthonormal(&columns[..k], 1e-9, 1),
+        sources_span: orthonormal(&sources, 1e-9, 1),
+        source_span,
+        trading,
         splits,
         days: &days,
     };
@@ -436,6 +492,8 @@ struct Shared<'a> {
     mse: f64,
     main: [f64; 3],
     source_span: Vec<Vec<f64>>,
+    sources_span: Vec<Vec<f64>>,
+    trading: Option<f64>,
     splits: &'a [SplitName],
     days: &'a [f64],
 }
@@ -476,6 +534,8 @@ fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssR
             main_source: shared.main,
             tangent,
             source_span: shared.source_span.clone(),
+            sources_span: shared.sources_span.clone(),
+            trading: shared.trading,
             total_fit,
             splits: shared.splits.to_vec(),
             source_grid: OnceLock::new(),

@@ -176,4 +176,25 @@ impl OwnedEffect {
     pub fn family(&self) -> &'static str {
         self.borrow(&[]).family()
     }
+
+    /// Whether `other` is the same term of F: two second sources less than [`SAME_SOURCE_KM`]
+    /// apart horizontally (a source's depth is the least resolved of its coordinates), any
+    /// two other effects of one family. Sources farther apart are two terms, each with its own
+    /// volume change.
+    pub fn same_term(&self, other: &OwnedEffect) -> bool {
+        match (self, other) {
+            (
+                OwnedEffect::SecondSource { x_km, y_km, .. },
+                OwnedEffect::SecondSource {
+                    x_km: x, y_km: y, ..
+                },
+            ) => f64::from(x_km - x).hypot(f64::from(y_km - y)) < SAME_SOURCE_KM,
+            _ => self.family() == other.family(),
+        }
+    }
 }
+
+/// Horizontal distance (km) within which a second source found again is the one F declares:
+/// the synthetic recovery check's position tolerance, within which a located source is the
+/// injected one.
+pub const SAME_SOURCE_KM: f64 = 2.0;

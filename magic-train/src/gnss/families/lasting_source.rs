@@ -750,9 +750,14 @@ mod tests {
             let bytes = model.encode().unwrap();
             let model = Model::decode(&bytes).unwrap();
             let splits = opts.splits_for(&with.problem);
-            let res =
-                crate::gnss::residuals::residuals(&with.problem, &model, &splits, MainSource::Free)
-                    .unwrap();
+            let res = crate::gnss::residuals::residuals(
+                &with.problem,
+                &model,
+                &splits,
+                MainSource::Free,
+                1,
+            )
+            .unwrap();
             let loc = res.locating();
             let alone = change_alone(&with.problem, &clean.problem, loc);
             let fit = search(&alone);

@@ -14,6 +14,8 @@ fn plain<'a>(network: &'a Network, scale: &'a [f64], days: &'a [f64]) -> Shared<
         mse: 0.0,
         main: [0.0; 3],
         source_span: Vec::new(),
+        sources_span: Vec::new(),
+        trading: None,
         splits: &[SplitName::Train],
         days,
     }
@@ -101,7 +103,8 @@ fn beside_main_source(
     let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
     let shared = Shared {
         main,
-        source_span: span,
+        source_span: span.clone(),
+        sources_span: span,
         ..plain(network, scale, &days)
     };
     view(&shared, rows, Vec::new())
@@ -452,4 +455,70 @@ fn a_deep_encoder_source_is_refitted_where_the_data_put_it() {
     for k in 0..3 {
         assert!((pos[k] - truth[k]).abs() < 1e-3, "{pos:?} vs {truth:?}");
     }
+}
+
+/// Beside a declared extra source the span a new source must reach beyond holds its field:
+/// found again, the declared source is nothing new; a source elsewhere still is.
+#[test]
+fn a_declared_source_found_again_is_not_a_new_source() {
+    use crate::gnss::families::second_source::resolvable;
+    let (network, scale, main, span) = akutan_main_source();
+    let nc = scale.len();
+    let declared = [main[0] - 7.0, main[1] - 1.5, 5.0];
+    let mut field = vec![0.0; nc];
+    let p = [declared[0], declared[1], declared[2], 1.0];
+    mogi::field(&network.stations, &p, &mut field).unwrap();
+    let mut columns: Vec<(Vec<f64>, f64)> = span.iter().map(|q| (q.clone(), 1.0)).collect();
+    columns.push(scaled(
+        field.iter().zip(&scale).map(|(v, s)| v / s).collect(),
+    ));
+    let rows = vec![vec![0.0; nc]; 10];
+    let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+    let alone = beside_main_source(&network, &scale, main, span.clone(), &rows);
+    let shared = Shared {
+        main,
+        source_span: span,
+        sources_span: orthonormal(&columns, 1e-9, 2),
+        ..plain(&network, &scale, &days)
+    };
+    let beside = view(&shared, &rows, Vec::new());
+    assert!(resolvable(&alone, declared) > 0.5);
+    assert!(resolvable(&beside, declared) < 1e-6);
+    let elsewhere = [main[0] + 6.0, main[1] + 5.0, 4.0];
+    assert!(
+        resolvable(&beside, elsewhere) > 0.5,
+        "{}",
+        resolvable(&beside, elsewhere)
+    );
+}
+
+/// A declared source the main one trades with (its field mostly in the main source's span)
+/// rejects every further source; one mostly beyond it does not.
+#[test]
+fn no_source_is_taken_beside_a_declared_one_the_main_source_trades_with() {
+    use crate::analysis::Rejection;
+    use crate::gnss::families::second_source::{rejection, MIN_RESOLVABLE_DECLARED};
+    let (network, scale, main, span) = akutan_main_source();
+    let nc = scale.len();
+    let rows = vec![vec![0.0; nc]; 10];
+    let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
+    let far = [main[0] + 8.0, main[1] - 3.0, 5.0];
+    let with = |trading: Option<f64>| {
+        let shared = Shared {
+            main,
+            source_span: span.clone(),
+            sources_span: span.clone(),
+            trading,
+            ..plain(&network, &scale, &days)
+        };
+        rejection(&view(&shared, &rows, Vec::new()), far)
+    };
+    assert_eq!(with(None), None);
+    assert_eq!(
+        with(Some(0.4)),
+        Some(Rejection::BesideTrade {
+            share: 0.4,
+            least: MIN_RESOLVABLE_DECLARED
+        })
+    );
 }
