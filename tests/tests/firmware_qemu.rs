@@ -354,8 +354,8 @@ fn firmware_agrees_with_the_host() {
     );
 }
 
-/// A model with every effect family declared (latent: common mode, elevation, second source;
-/// time-dependent: seasonal, step, drift) reads a date on every line; the board must agree with
+/// A model with every effect family declared (latent: common mode, elevation, two second
+/// sources; time-dependent: seasonal, step, drift) reads a date on every line; the board must agree with
 /// `invert_at` on the host, and fit the 48 KiB flash budget (the link would fail otherwise).
 #[test]
 fn effects_models_run_on_the_firmware() {
@@ -376,11 +376,17 @@ fn effects_models_run_on_the_firmware() {
             offset_mm: [3.0, -2.0, 6.0],
         },
     ];
+    // Two extra sources, each with its own volume change (`magic loop --extra-sources 2`).
     let second = vec![
         OwnedEffect::SecondSource {
             x_km: -4.0,
             y_km: 3.0,
             depth_km: 6.0,
+        },
+        OwnedEffect::SecondSource {
+            x_km: 7.0,
+            y_km: -2.0,
+            depth_km: 4.0,
         },
         OwnedEffect::Drift {
             t0_day: 13_880.0,
@@ -389,7 +395,7 @@ fn effects_models_run_on_the_firmware() {
     ];
     let tmp = TempDir::new("firmware");
     check_effects_model(&tmp.0, "first", first, 4 + 3 + 1, &mut rng);
-    check_effects_model(&tmp.0, "second", second, 4 + 1, &mut rng);
+    check_effects_model(&tmp.0, "second", second, 4 + 1 + 1, &mut rng);
 }
 
 /// Builds the firmware with an effects model (written into `dir`) and checks it against the host.
