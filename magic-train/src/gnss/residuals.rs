@@ -438,14 +438,12 @@ pub fn residuals(
         }
         j += e.n_latent();
     }
+    // With F holding as many extra sources as it may, no new one need be told from them.
+    if declared.len() >= extra_sources {
+        declared.clear();
+    }
+    let declared: Vec<&(Vec<f64>, f64)> = declared.iter().filter_map(|&j| columns.get(j)).collect();
     let source_span = orthonormal(&columns[..k], 1e-9, 1);
-    // With F holding as many extra sources as it may, no new one is told apart from them.
-    let open = declared.len() < extra_sources;
-    let declared: Vec<&(Vec<f64>, f64)> = declared
-        .iter()
-        .filter_map(|&j| columns.get(j))
-        .filter(|_| open)
-        .collect();
     let trading = declared
         .iter()
         .map(|(c, _)| share_beyond(&source_span, c))

@@ -64,10 +64,11 @@ pub const MIN_RESOLVABLE: f64 = 0.25;
 /// for F to take another source beside it. Below it the two trade: over the main source's
 /// episodes the encoder gives part of the main field to the declared source, and what is left
 /// is a source across the main one from it, which the loop would add as a second. On trial
-/// seeds 101–105 under `red`, once a near lasting deflation (0.32–0.44 of its field beyond)
-/// was declared, such a copy at the 2008 inflation was significant in 4 of 5 and kept, and
-/// taking the main field's second order into the span stopped one; the sources declared before
-/// a true second one in the two-source scenario had 0.57–0.71 beyond. Half the field, between.
+/// seeds 101–105 under `red`, once a near lasting deflation was declared, such a copy at the
+/// 2008 inflation was significant in 4 of 5 and kept (taking the main field's second order
+/// into the span stopped one). The sources declared first there had 0.25–0.44 of their field
+/// beyond, those declared before a true second one in the two-source scenario 0.57–0.71. Half
+/// the field lies between (README, *A second source term in F*).
 pub const MIN_RESOLVABLE_DECLARED: f64 = 0.5;
 /// A refined position closer than this (km) to a face of the grid's box sits on its bound.
 pub const BOUND_TOLERANCE_KM: f64 = 0.25;
