@@ -103,11 +103,21 @@ impl std::fmt::Display for StopReason {
             StopReason::NothingBeatChance => {
                 write!(f, "no family explains more residual variance than chance")
             }
-            StopReason::NotDeclarable { families } => write!(
-                f,
-                "significant but not declarable as physics (or declared already): {}",
-                families.join(", ")
-            ),
+            StopReason::NotDeclarable { families } => {
+                write!(
+                    f,
+                    "significant but not declarable as physics (or declared already): {}",
+                    families.join(", ")
+                )?;
+                let source = |x: &String| x == "second_source" || x == "lasting_source";
+                if families.iter().any(source) {
+                    write!(
+                        f,
+                        " (a point source F does not hold yet needs a larger --extra-sources)"
+                    )?;
+                }
+                Ok(())
+            }
             StopReason::NoValidationGain { family, valid } => write!(
                 f,
                 "{family} did not lower B's validation MSE ({:.4} → {:.4}) and was taken out of F again",
@@ -325,4 +335,24 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
     };
     report::loop_report::write(&out, &plots, dir)?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StopReason;
+
+    #[test]
+    fn a_source_left_out_says_how_to_take_it() {
+        let stop = |f: &[&str]| {
+            StopReason::NotDeclarable {
+                families: f.iter().map(|s| s.to_string()).collect(),
+            }
+            .to_string()
+        };
+        assert_eq!(
+            stop(&["seasonal"]),
+            "significant but not declarable as physics (or declared already): seasonal"
+        );
+        assert!(stop(&["seasonal", "lasting_source"]).ends_with("a larger --extra-sources)"));
+    }
 }
