@@ -17,6 +17,24 @@ pub fn project(basis: &[Vec<f64>], g: &[f64]) -> Vec<f64> {
     out
 }
 
+/// The share (in norm) of `v` beyond the span of the orthonormal `basis`; 0 for a zero `v`.
+///
+/// ```
+/// use magic_train::analysis::projection::share_beyond;
+/// let basis = [vec![1.0, 0.0, 0.0]];
+/// assert_eq!(share_beyond(&basis, &[3.0, 4.0, 0.0]), 0.8);
+/// assert_eq!(share_beyond(&basis, &[0.0; 3]), 0.0);
+/// ```
+pub fn share_beyond(basis: &[Vec<f64>], v: &[f64]) -> f64 {
+    let norm2 = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
+    let n = norm2(v);
+    if n > 0.0 {
+        (norm2(&project(basis, v)) / n).sqrt()
+    } else {
+        0.0
+    }
+}
+
 /// A column for [`orthonormal`], with its largest entry (absolute) as its scale.
 ///
 /// ```

@@ -25,7 +25,7 @@
 //! the residuals whole, and so does a main source that really moves between its episodes.
 
 use super::{lsq, GnssProblem, Network};
-use crate::analysis::projection::{orthonormal, project, scaled};
+use crate::analysis::projection::{orthonormal, project, scaled, share_beyond};
 use crate::analysis::MainSource;
 use crate::data::SplitName;
 use crate::gnss::families::second_source::MIN_RESOLVABLE_DECLARED;
@@ -53,24 +53,6 @@ pub struct SourceGrid {
 
 /// The main source's variables (x, y, depth, volume change): the first of every GNSS model.
 const SOURCE_VARIABLES: usize = 4;
-
-/// The share (in norm) of `v` beyond the span of the orthonormal `basis`; 0 for a zero `v`.
-///
-/// ```
-/// use magic_train::gnss::residuals::share_beyond;
-/// let basis = [vec![1.0, 0.0, 0.0]];
-/// assert_eq!(share_beyond(&basis, &[3.0, 4.0, 0.0]), 0.8);
-/// assert_eq!(share_beyond(&basis, &[0.0; 3]), 0.0);
-/// ```
-pub fn share_beyond(basis: &[Vec<f64>], v: &[f64]) -> f64 {
-    let norm2 = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
-    let n = norm2(v);
-    if n > 0.0 {
-        (norm2(&project(basis, v)) / n).sqrt()
-    } else {
-        0.0
-    }
-}
 
 /// Least share (squared norm) of each direction of the main source's span that must lie off the
 /// nuisances (translations, declared latent effects) for the source to be held in place (see
@@ -447,7 +429,7 @@ pub fn residuals(
     let trading = declared
         .iter()
         .map(|(c, _)| share_beyond(&source_span, c))
-        .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.min(v))))
+        .reduce(f64::min)
         .filter(|&v| v < MIN_RESOLVABLE_DECLARED);
     let mut sources = columns[..k].to_vec();
     sources.extend(declared.into_iter().cloned());

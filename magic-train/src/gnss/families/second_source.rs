@@ -31,9 +31,9 @@
 //! coherence between stations instead ([`latent::resample_coherent`]).
 
 use super::latent::{self, round3, Cross};
-use crate::analysis::projection::{orthonormal, project, scaled};
+use crate::analysis::projection::{orthonormal, project, scaled, share_beyond};
 use crate::analysis::{Family, Rejection, MIN_EXCESS};
-use crate::gnss::residuals::{share_beyond, translation, SourceGrid};
+use crate::gnss::residuals::{translation, SourceGrid};
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
 use crate::numerics::median;
