@@ -3,7 +3,8 @@
 //! Round 0 trains B (encoder + F) and C (+ correction) with the problem's plain F. Each round
 //! then analyses B's residuals ([`crate::analysis`]: every family scored on held-out data against
 //! chance), adds the top significant family whose term can be declared in F and is not yet (one
-//! term of each kind: [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
+//! term of each kind, or as many point sources and steps as the options allow:
+//! [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
 //! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
 //! significance in the residuals is necessary, not sufficient; an effect that does not is taken
 //! out again and the loop stops. The loop ends with a [`StopReason`] the report prints. Effects
@@ -82,6 +83,9 @@ pub enum StopReason {
     NotDeclarable {
         /// The significant families.
         families: Vec<String>,
+        /// Those among them found as another term than F's, of a family F holds as many of as
+        /// the options allow ([`Analysis::beyond_capacity`](crate::analysis::Analysis::beyond_capacity)).
+        beyond_capacity: Vec<String>,
     },
     /// The added effect did not lower B's validation MSE and was taken out again.
     NoValidationGain {
@@ -103,18 +107,21 @@ impl std::fmt::Display for StopReason {
             StopReason::NothingBeatChance => {
                 write!(f, "no family explains more residual variance than chance")
             }
-            StopReason::NotDeclarable { families } => {
+            StopReason::NotDeclarable {
+                families,
+                beyond_capacity,
+            } => {
                 write!(
                     f,
                     "significant but not declarable as physics (or declared already): {}",
                     families.join(", ")
                 )?;
-                let source = |x: &String| x == "second_source" || x == "lasting_source";
-                if families.iter().any(source) {
-                    write!(
-                        f,
-                        " (a point source F does not hold yet needs a larger --extra-sources)"
-                    )?;
+                let has = |names: &[&str]| beyond_capacity.iter().any(|x| names.contains(&&**x));
+                if has(&["second_source", "lasting_source"]) {
+                    write!(f, " (another point source needs a larger --extra-sources)")?;
+                }
+                if has(&["step"]) {
+                    write!(f, " (another step needs a larger --steps)")?;
                 }
                 Ok(())
             }
@@ -280,7 +287,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                 rounds: opts.max_rounds,
             };
         }
-        match analysis.top_declarable(&effects, opts.analysis.extra_sources) {
+        match analysis.top_declarable(&effects, &opts.analysis) {
             Some(cand) => {
                 effects.extend(cand.effect.clone());
                 added = Some(cand.clone());
@@ -295,7 +302,10 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                 break if found.is_empty() {
                     StopReason::NothingBeatChance
                 } else {
-                    StopReason::NotDeclarable { families: found }
+                    StopReason::NotDeclarable {
+                        families: found,
+                        beyond_capacity: analysis.beyond_capacity(&effects, &opts.analysis),
+                    }
                 };
             }
         }
@@ -342,17 +352,23 @@ mod tests {
     use super::StopReason;
 
     #[test]
-    fn a_source_left_out_says_how_to_take_it() {
-        let stop = |f: &[&str]| {
+    fn a_term_left_out_says_how_to_take_it() {
+        let stop = |f: &[&str], beyond: &[&str]| {
+            let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect();
             StopReason::NotDeclarable {
-                families: f.iter().map(|s| s.to_string()).collect(),
+                families: names(f),
+                beyond_capacity: names(beyond),
             }
             .to_string()
         };
         assert_eq!(
-            stop(&["seasonal"]),
+            stop(&["seasonal"], &[]),
             "significant but not declarable as physics (or declared already): seasonal"
         );
-        assert!(stop(&["seasonal", "lasting_source"]).ends_with("a larger --extra-sources)"));
+        let source = stop(&["seasonal", "lasting_source"], &["lasting_source"]);
+        assert!(source.ends_with("a larger --extra-sources)"), "{source}");
+        // A source found again where F has one is not a reason for another.
+        assert!(!stop(&["lasting_source"], &[]).contains("--extra-sources"));
+        assert!(stop(&["step"], &["step"]).ends_with("a larger --steps)"));
     }
 }

@@ -67,6 +67,9 @@ pub struct AnalysisOptions {
     /// ([`Context::sources_span`](crate::gnss::residuals::Context::sources_span)); the loop
     /// adds none beyond it.
     pub extra_sources: usize,
+    /// The volcano: the most steps F may hold, each at its own station and time
+    /// ([`OwnedEffect::same_term`]); the loop adds none beyond it.
+    pub steps: usize,
 }
 
 impl Default for AnalysisOptions {
@@ -79,11 +82,22 @@ impl Default for AnalysisOptions {
             bootstrap: 20,
             main_source: MainSource::Free,
             extra_sources: 1,
+            steps: 1,
         }
     }
 }
 
 impl AnalysisOptions {
+    /// The most terms of `e`'s family F may hold: [`extra_sources`](Self::extra_sources) for
+    /// a point source, [`steps`](Self::steps) for a step, one of any other family.
+    pub fn most_terms(&self, e: &OwnedEffect) -> usize {
+        match e {
+            OwnedEffect::SecondSource { .. } => self.extra_sources,
+            OwnedEffect::Step { .. } => self.steps,
+            _ => 1,
+        }
+    }
+
     /// The analysed splits for `problem`, without repeats.
     pub fn splits_for<P: Problem + ?Sized>(&self, problem: &P) -> Vec<SplitName> {
         let mut out: Vec<SplitName> = Vec::new();
@@ -124,27 +138,44 @@ impl Analysis {
     /// ([`OwnedEffect::same_term`]): two candidate families may declare the same term (a second
     /// source found as an episode or as a change that stays), and a source found again where F
     /// has one would buy the encoder another free variable for whatever the first one left, not
-    /// a second effect. A source elsewhere is another term, taken while F holds fewer than
-    /// `extra_sources`. F holds at most [`MAX_EFFECTS`](magic_core::effects::MAX_EFFECTS)
-    /// effects.
+    /// a second effect. A source elsewhere, or a step at another station or time, is another
+    /// term, taken while F holds fewer of its family than `opts` allows
+    /// ([`AnalysisOptions::most_terms`]). F holds at most
+    /// [`MAX_EFFECTS`](magic_core::effects::MAX_EFFECTS) effects.
     pub fn top_declarable(
         &self,
         declared: &[OwnedEffect],
-        extra_sources: usize,
+        opts: &AnalysisOptions,
     ) -> Option<&Candidate> {
         if declared.len() >= magic_core::effects::MAX_EFFECTS {
             return None;
         }
-        let is_source = |e: &OwnedEffect| matches!(e, OwnedEffect::SecondSource { .. });
-        let sources = declared.iter().filter(|e| is_source(e)).count();
         let new_term = |e: &OwnedEffect| {
             let again = declared.iter().any(|d| d.same_term(e));
-            let full = is_source(e) && sources >= extra_sources;
-            !(again || full)
+            let held = declared.iter().filter(|d| d.family() == e.family()).count();
+            !again && held < opts.most_terms(e)
         };
         self.effects
             .iter()
             .find(|c| c.significant && c.effect.as_ref().is_some_and(new_term))
+    }
+
+    /// The families of the significant candidates that F does not declare yet but may hold no
+    /// more of (`opts`, [`AnalysisOptions::most_terms`]): a source elsewhere with F's extra
+    /// sources all taken, a step elsewhere with its steps all taken. The loop's stop says which
+    /// option would take them.
+    pub fn beyond_capacity(&self, declared: &[OwnedEffect], opts: &AnalysisOptions) -> Vec<String> {
+        let beyond = |e: &OwnedEffect| {
+            let held = declared.iter().filter(|d| d.family() == e.family()).count();
+            !declared.iter().any(|d| d.same_term(e)) && held >= opts.most_terms(e)
+        };
+        let mut out: Vec<String> = Vec::new();
+        for c in &self.effects {
+            if c.significant && c.effect.as_ref().is_some_and(beyond) && !out.contains(&c.family) {
+                out.push(c.family.clone());
+            }
+        }
+        out
     }
 
     /// The JSON report (`{"effects": [{"family", "variance_explained", "chance_level",
@@ -290,9 +321,13 @@ mod tests {
             summary: String::new(),
             seconds: 0.0,
         };
+        let two = AnalysisOptions {
+            extra_sources: 2,
+            ..AnalysisOptions::default()
+        };
         let top = |declared: &[OwnedEffect]| {
             analysis
-                .top_declarable(declared, 2)
+                .top_declarable(declared, &two)
                 .map(|c| c.family.clone())
         };
         let near = OwnedEffect::SecondSource {
@@ -317,7 +352,7 @@ mod tests {
             Some("lasting_source")
         );
         // With one extra source allowed, F's one is the only one.
-        let one = analysis.top_declarable(std::slice::from_ref(&far), 1);
+        let one = analysis.top_declarable(std::slice::from_ref(&far), &AnalysisOptions::default());
         assert_eq!(one.map(|c| c.family.as_str()), Some("common_mode"));
         // F is full.
         let full = [far, OwnedEffect::Elevation { z_ref_km: 0.1 }];
@@ -330,5 +365,49 @@ mod tests {
             ]),
             None
         );
+    }
+
+    #[test]
+    fn a_step_elsewhere_is_another_term_while_f_may_hold_it() {
+        let step = |station: u16, epoch_day: f32| OwnedEffect::Step {
+            station,
+            epoch_day,
+            offset_mm: [2.0, -1.0, 8.0],
+        };
+        let analysis = Analysis {
+            problem: "mogi",
+            splits: vec![],
+            effects: vec![
+                significant("step", 0.3, step(4, 15_100.0)),
+                significant("common_mode", 0.1, OwnedEffect::CommonMode),
+            ],
+            residuals: json!({}),
+            summary: String::new(),
+            seconds: 0.0,
+        };
+        let top = |declared: &[OwnedEffect], steps: usize| {
+            let opts = AnalysisOptions {
+                steps,
+                ..AnalysisOptions::default()
+            };
+            analysis
+                .top_declarable(declared, &opts)
+                .map(|c| c.family.clone())
+        };
+        assert_eq!(top(&[], 1).as_deref(), Some("step"));
+        // The same station 10 days off: the declared step found again.
+        assert_eq!(top(&[step(4, 15_090.0)], 2).as_deref(), Some("common_mode"));
+        // Another station, or the same one a year off: another step, if F may hold two.
+        assert_eq!(top(&[step(1, 15_100.0)], 2).as_deref(), Some("step"));
+        assert_eq!(top(&[step(4, 14_735.0)], 2).as_deref(), Some("step"));
+        assert_eq!(top(&[step(1, 15_100.0)], 1).as_deref(), Some("common_mode"));
+        let one = AnalysisOptions::default();
+        assert_eq!(
+            analysis.beyond_capacity(&[step(1, 15_100.0)], &one),
+            ["step"]
+        );
+        assert!(analysis
+            .beyond_capacity(&[step(4, 15_090.0)], &one)
+            .is_empty());
     }
 }

@@ -38,6 +38,10 @@ pub struct LoopCmd {
     /// *A second source term in F*).
     #[arg(long, default_value_t = 1)]
     extra_sources: usize,
+    /// The volcano: the most steps F may hold, each at its own station and time (measured in
+    /// the README, *Steps at several stations*).
+    #[arg(long, default_value_t = 1)]
+    steps: usize,
     /// Report folder (Markdown, JSON, PNG, the rounds' model files).
     #[arg(long, default_value = "out/loop")]
     report: PathBuf,
@@ -68,6 +72,7 @@ pub fn run(a: &LoopCmd) -> Result<()> {
                 surrogates: a.surrogates,
                 main_source: a.main_source,
                 extra_sources: a.extra_sources,
+                steps: a.steps,
                 ..AnalysisOptions::default()
             },
         };

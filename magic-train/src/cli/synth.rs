@@ -237,6 +237,10 @@ pub struct SynthLoopCmd {
     /// *A second source term in F*).
     #[arg(long, default_value_t = 1)]
     extra_sources: usize,
+    /// The volcano: the most steps F may hold, each at its own station and time (measured in
+    /// the README, *Steps at several stations*).
+    #[arg(long, default_value_t = 1)]
+    steps: usize,
     /// Folder for each run's loop report (and the tables).
     #[arg(long, default_value = "out/synth-loop")]
     out: PathBuf,
@@ -280,6 +284,7 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
             analysis: AnalysisOptions {
                 main_source: a.main_source,
                 extra_sources: a.extra_sources,
+                steps: a.steps,
                 ..AnalysisOptions::default()
             },
         };

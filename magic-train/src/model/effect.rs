@@ -178,9 +178,9 @@ impl OwnedEffect {
     }
 
     /// Whether `other` is the same term of F: two second sources less than [`SAME_SOURCE_KM`]
-    /// apart horizontally (a source's depth is the least resolved of its coordinates), any
-    /// two other effects of one family. Sources farther apart are two terms, each with its own
-    /// volume change.
+    /// apart horizontally (a source's depth is the least resolved of its coordinates), two steps
+    /// at one station less than [`SAME_STEP_DAYS`] apart, any two other effects of one family.
+    /// Sources farther apart and steps elsewhere or at other times are other terms.
     pub fn same_term(&self, other: &OwnedEffect) -> bool {
         match (self, other) {
             (
@@ -189,6 +189,16 @@ impl OwnedEffect {
                     x_km: x, y_km: y, ..
                 },
             ) => f64::from(x_km - x).hypot(f64::from(y_km - y)) < SAME_SOURCE_KM,
+            (
+                OwnedEffect::Step {
+                    station, epoch_day, ..
+                },
+                OwnedEffect::Step {
+                    station: s,
+                    epoch_day: e,
+                    ..
+                },
+            ) => station == s && f64::from(epoch_day - e).abs() < SAME_STEP_DAYS,
             _ => self.family() == other.family(),
         }
     }
@@ -198,3 +208,30 @@ impl OwnedEffect {
 /// the synthetic recovery check's position tolerance, within which a located source is the
 /// injected one.
 pub const SAME_SOURCE_KM: f64 = 2.0;
+
+/// Days within which a step found again at a station is the one F declares there: the step
+/// scan's margin ([`STEP_SCAN_DAYS`](crate::gnss::families::step::STEP_SCAN_DAYS)), the days a
+/// step needs on each side to be told from the noise, and so from another step.
+pub const SAME_STEP_DAYS: f64 = 30.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn step(station: u16, epoch_day: f32) -> OwnedEffect {
+        OwnedEffect::Step {
+            station,
+            epoch_day,
+            offset_mm: [1.0, 0.0, 5.0],
+        }
+    }
+
+    #[test]
+    fn steps_are_one_term_at_one_station_and_time() {
+        assert!(step(2, 15_000.0).same_term(&step(2, 15_012.0)));
+        assert!(!step(2, 15_000.0).same_term(&step(2, 15_200.0)));
+        assert!(!step(2, 15_000.0).same_term(&step(3, 15_000.0)));
+        assert!(!step(2, 15_000.0).same_term(&OwnedEffect::CommonMode));
+        assert!(OwnedEffect::CommonMode.same_term(&OwnedEffect::CommonMode));
+    }
+}

@@ -6,7 +6,7 @@ mod int8;
 mod layer;
 mod spec;
 
-pub use effect::{OwnedEffect, SAME_SOURCE_KM};
+pub use effect::{OwnedEffect, SAME_SOURCE_KM, SAME_STEP_DAYS};
 pub use layer::{OwnedLayer, OwnedWeights};
 pub use spec::{intern, owned_problem, problem_bytes};
 
