@@ -37,6 +37,8 @@ pub enum Injection {
     Elevation,
     /// An offset at one station from an epoch on.
     Step,
+    /// Another offset like [`Injection::Step`]'s, at another station than its.
+    StepElsewhere,
     /// A second Mogi source.
     SecondSource {
         /// Its time course.
@@ -55,7 +57,7 @@ impl Injection {
             Injection::CommonMode => "common_mode",
             Injection::Seasonal => "seasonal",
             Injection::Elevation => "elevation",
-            Injection::Step => "step",
+            Injection::Step | Injection::StepElsewhere => "step",
             Injection::SecondSource {
                 shape: Shape::Lasting,
                 ..
@@ -67,7 +69,10 @@ impl Injection {
 
     /// Whether it begins at a time (and so has a placement), rather than lasting throughout.
     pub fn is_event(self) -> bool {
-        matches!(self, Injection::Step | Injection::SecondSource { .. })
+        matches!(
+            self,
+            Injection::Step | Injection::StepElsewhere | Injection::SecondSource { .. }
+        )
     }
 
     /// The salt of its random stream. An effect draws the same parameters in every scenario
@@ -89,6 +94,7 @@ impl Injection {
                 (Shape::Lasting, Distance::Apart) => 11,
             },
             Injection::Drift => 6,
+            Injection::StepElsewhere => 12,
         };
         0xEFFE_C700 + k
     }
@@ -103,6 +109,11 @@ impl Injection {
             Injection::Seasonal => inject::seasonal::inject(ctx, rng, rows),
             Injection::Elevation => inject::elevation::inject(ctx, rng, rows),
             Injection::Step => inject::step::inject(ctx, rng, rows),
+            Injection::StepElsewhere => {
+                let mut first = super::draw::stream(ctx.seed, Injection::Step.salt());
+                let first = inject::step::station(ctx, &mut first);
+                inject::step::inject_elsewhere(ctx, rng, rows, first)
+            }
             Injection::SecondSource { shape, distance } => {
                 inject::second_source::inject(ctx, rng, rows, shape, distance)
             }
@@ -163,6 +174,10 @@ pub enum Scenario {
     /// `lasting_deflation_far`, both in the placement's period.
     #[value(name = "second_source+lasting_source")]
     TwoSources,
+    /// Two steps: `step`'s and another like it at another station, its epoch drawn on its own
+    /// in the same period.
+    #[value(name = "step+step")]
+    TwoSteps,
 }
 
 const PULSE: Injection = Injection::SecondSource {
@@ -172,7 +187,7 @@ const PULSE: Injection = Injection::SecondSource {
 
 impl Scenario {
     /// Every scenario, `clean` first, then the single effects, then two effects at once.
-    pub const ALL: [Scenario; 15] = [
+    pub const ALL: [Scenario; 16] = [
         Scenario::Clean,
         Scenario::CommonMode,
         Scenario::Seasonal,
@@ -188,6 +203,7 @@ impl Scenario {
         Scenario::SecondSourceStep,
         Scenario::CommonModeSeasonal,
         Scenario::TwoSources,
+        Scenario::TwoSteps,
     ];
 
     /// The scenario's name (the family it injects, `clean`, or the families joined by `+`).
@@ -208,6 +224,7 @@ impl Scenario {
             Scenario::SecondSourceStep => "second_source+step",
             Scenario::CommonModeSeasonal => "common_mode+seasonal",
             Scenario::TwoSources => "second_source+lasting_source",
+            Scenario::TwoSteps => "step+step",
         }
     }
 
@@ -230,6 +247,7 @@ impl Scenario {
             Scenario::SecondSourceStep => vec![PULSE, Injection::Step],
             Scenario::CommonModeSeasonal => vec![Injection::CommonMode, Injection::Seasonal],
             Scenario::TwoSources => vec![PULSE, source(Shape::Lasting, Distance::Far)],
+            Scenario::TwoSteps => vec![Injection::Step, Injection::StepElsewhere],
         }
     }
 
@@ -310,6 +328,7 @@ mod tests {
             Scenario::SecondSourceStep,
             Scenario::CommonModeSeasonal,
             Scenario::TwoSources,
+            Scenario::TwoSteps,
         ] {
             let fams: Vec<&str> = sc.injections().iter().map(|i| i.family()).collect();
             assert_eq!(fams.join("+"), sc.name());
