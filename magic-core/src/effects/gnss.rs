@@ -286,6 +286,30 @@ mod tests {
     }
 
     #[test]
+    fn steps_add_each_from_its_epoch() {
+        let step = |station, epoch_day, offset_mm| Effect::Step {
+            station,
+            epoch_day,
+            offset_mm,
+        };
+        let effects = [
+            step(0, 100.0, [1.0, 2.0, 3.0]),
+            step(1, 150.0, [-1.0, 0.5, 4.0]),
+            step(0, 200.0, [0.25, 0.0, -3.0]),
+        ];
+        // Main source off (ΔV 0): only the steps move the stations.
+        let at = |t: f64| {
+            let mut out = [0.0f64; 6];
+            mogi_with_effects(&NET, &effects, &[0.0, 0.0, 5.0, 0.0], t, &mut out).unwrap();
+            out
+        };
+        assert_eq!(at(99.0), [0.0; 6]);
+        assert_eq!(at(149.0), [1.0, 0.0, 2.0, 0.0, 3.0, 0.0]);
+        assert_eq!(at(150.0), [1.0, -1.0, 2.0, 0.5, 3.0, 4.0]);
+        assert_eq!(at(200.0), [1.25, -1.0, 2.0, 0.5, 0.0, 4.0]);
+    }
+
+    #[test]
     fn time_effects_need_a_date() {
         let rate = [0u8; 24];
         let e = Effect::Drift {
