@@ -63,6 +63,16 @@ pub enum Rejection {
         /// The least share beside which another source is taken.
         least: f64,
     },
+    /// A source one station sees alone: most of its pattern at that station, whose own motion
+    /// (a step, a settling monument) it stands for.
+    OneStation {
+        /// The station.
+        station: String,
+        /// The share of the pattern's energy it holds.
+        share: f64,
+        /// The largest share accepted.
+        most: f64,
+    },
     /// Its fit over the whole record, the one F would take, adds nothing (a drift whose
     /// held-out fits each found a station in part of the record, though no station's rate
     /// stands out over all of it), in words that say why.
@@ -134,6 +144,15 @@ impl fmt::Display for Rejection {
                 "beside a declared source the main source trades with ({share:.2} of its field \
                  beyond the main source's span, at least {least:.2} needed for another)"
             ),
+            Rejection::OneStation {
+                station,
+                share,
+                most,
+            } => write!(
+                f,
+                "seen by one station: {station} holds {share:.2} of its field's energy (at most \
+                 {most:.2} for a source)"
+            ),
             Rejection::NothingToAdd(why) => write!(f, "nothing to add: {why}"),
             Rejection::PartOf(why) => f.write_str(why),
         }
@@ -186,6 +205,16 @@ mod tests {
         assert_eq!(
             near.to_string(),
             "its field mostly a move of the main source (0.13 of it beyond, at least 0.25 needed)"
+        );
+        let one = Rejection::OneStation {
+            station: "AKLV".into(),
+            share: 0.912,
+            most: 0.75,
+        };
+        assert_eq!(one.bound(), None);
+        assert_eq!(
+            one.to_string(),
+            "seen by one station: AKLV holds 0.91 of its field's energy (at most 0.75 for a source)"
         );
     }
 

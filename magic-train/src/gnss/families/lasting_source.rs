@@ -36,7 +36,8 @@
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid_at, located_draw, on_bound, pattern, position_params, refine,
-    resample_at, resolvable, translations, unresolvable, with_translations, MIN_RESOLVABLE,
+    resample_at, resolvable, station_share, translations, unresolvable, with_translations,
+    MIN_RESOLVABLE,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
@@ -467,6 +468,7 @@ impl Family<GnssResiduals> for LastingSource {
             "x_km": round3(fit.pos[0]), "y_km": round3(fit.pos[1]), "depth_km": round3(fit.pos[2]),
             "onset": date(fit.onset.min(dv.len())), "start": date(begun), "end": date(done),
             "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
+            "station_share": round3(station_share(res.locating(), fit.pos).1),
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {

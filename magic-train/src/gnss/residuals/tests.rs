@@ -110,6 +110,38 @@ fn beside_main_source(
     view(&shared, rows, Vec::new())
 }
 
+/// A source right under a station, shallow, is seen by that station alone (one station's
+/// three components cannot place a point source): rejected, for either source family, where
+/// the same source deeper is not.
+#[test]
+fn a_shallow_source_under_one_station_is_that_station() {
+    use crate::analysis::{Family, Rejection};
+    use crate::gnss::families::lasting_source::{LastingFit, LastingSource};
+    use crate::gnss::families::second_source::{rejection, station_share, MAX_STATION_SHARE};
+    let (network, scale, main, span) = akutan_main_source();
+    let rows = vec![vec![0.0; scale.len()]; 10];
+    let res = beside_main_source(&network, &scale, main, span, &rows);
+    // The station farthest from the main source, where little of a field is a move of it.
+    let far = |s: &magic_core::mogi::Station| (s.x_km - main[0]).hypot(s.y_km - main[1]);
+    let (i, st) = (network.stations.iter().enumerate())
+        .max_by(|a, b| far(a.1).total_cmp(&far(b.1)))
+        .unwrap();
+    let under = |depth: f64| [st.x_km, st.y_km, depth];
+    let (station, share) = station_share(&res, under(1.25));
+    assert_eq!(station, i);
+    assert!(share > MAX_STATION_SHARE, "{share}");
+    let deep = station_share(&res, under(4.0)).1;
+    assert!(deep < MAX_STATION_SHARE, "{deep}");
+    let fit = |pos| LastingFit {
+        pos,
+        ..LastingFit::default()
+    };
+    let one = |r: Option<Rejection>| matches!(r, Some(Rejection::OneStation { station, .. }) if station == network.names[i]);
+    assert!(one(LastingSource.reject(&res, &fit(under(1.25)))));
+    assert!(!one(LastingSource.reject(&res, &fit(under(4.0)))));
+    assert!(!one(rejection(&res, under(4.0))));
+}
+
 /// A source's resolvable share (`second_source::resolvable`): none at the main source itself
 /// (its field is the volume's direction), little beside it at its depth, most far from it —
 /// and, channels weighted as the synthetic generator weighs them, the generator's own measure.
