@@ -72,10 +72,11 @@ pub const MIN_RESOLVABLE: f64 = 0.25;
 pub const MIN_RESOLVABLE_DECLARED: f64 = 0.5;
 /// The largest share of a source's pattern (in energy) one station may hold
 /// ([`station_share`]): beyond it, one station's own motion — a step, a monument settling —
-/// is taken for a shallow source under it. On trial seeds the lasting sources kept in place of
-/// a step (`step+step`, `--steps 2`, four loops) held 0.84–0.93 at one station, every true
-/// source found (`magic synth-check --first-seed 101 --seeds 5`, 60 analyses of the source
-/// scenarios) at most 0.65 (README, *Steps at several stations*).
+/// is taken for a shallow source under it. The lasting sources kept in place of a step in the
+/// held-out `step+step` loops (`--steps 2`; seeds 4, 5 and 6 under `red`, 10 under `paper`)
+/// held 0.84–0.93 at one station; every true source found on trial seeds (`magic synth-check
+/// --first-seed 101 --seeds 5`, 60 analyses of the source scenarios) at most 0.65 (README,
+/// *Steps at several stations*).
 pub const MAX_STATION_SHARE: f64 = 0.75;
 /// A refined position closer than this (km) to a face of the grid's box sits on its bound.
 pub const BOUND_TOLERANCE_KM: f64 = 0.25;
