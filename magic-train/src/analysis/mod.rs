@@ -114,6 +114,29 @@ impl AnalysisOptions {
     }
 }
 
+/// Where an effect stands against F's declared ones.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Term {
+    /// F declares it already ([`OwnedEffect::same_term`]).
+    Declared,
+    /// Another term of a family F holds as many of as the options allow.
+    Beyond,
+    /// Another term F may take.
+    New,
+}
+
+/// Where `e` stands against `declared` under `opts` ([`AnalysisOptions::most_terms`]).
+fn term(declared: &[OwnedEffect], e: &OwnedEffect, opts: &AnalysisOptions) -> Term {
+    let held = declared.iter().filter(|d| d.family() == e.family()).count();
+    if declared.iter().any(|d| d.same_term(e)) {
+        Term::Declared
+    } else if held >= opts.most_terms(e) {
+        Term::Beyond
+    } else {
+        Term::New
+    }
+}
+
 /// The result of [`analyse`].
 #[derive(Clone, Debug)]
 pub struct Analysis {
@@ -150,11 +173,7 @@ impl Analysis {
         if declared.len() >= magic_core::effects::MAX_EFFECTS {
             return None;
         }
-        let new_term = |e: &OwnedEffect| {
-            let again = declared.iter().any(|d| d.same_term(e));
-            let held = declared.iter().filter(|d| d.family() == e.family()).count();
-            !again && held < opts.most_terms(e)
-        };
+        let new_term = |e: &OwnedEffect| term(declared, e, opts) == Term::New;
         self.effects
             .iter()
             .find(|c| c.significant && c.effect.as_ref().is_some_and(new_term))
@@ -165,10 +184,7 @@ impl Analysis {
     /// sources all taken, a step elsewhere with its steps all taken. The loop's stop says which
     /// option would take them.
     pub fn beyond_capacity(&self, declared: &[OwnedEffect], opts: &AnalysisOptions) -> Vec<String> {
-        let beyond = |e: &OwnedEffect| {
-            let held = declared.iter().filter(|d| d.family() == e.family()).count();
-            !declared.iter().any(|d| d.same_term(e)) && held >= opts.most_terms(e)
-        };
+        let beyond = |e: &OwnedEffect| term(declared, e, opts) == Term::Beyond;
         let mut out: Vec<String> = Vec::new();
         for c in &self.effects {
             if c.significant && c.effect.as_ref().is_some_and(beyond) && !out.contains(&c.family) {
