@@ -35,9 +35,9 @@
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid_at, located_draw, on_bound, pattern, position_params, refine,
-    resample_at, resolvable, station_share, translations, unresolvable, with_translations,
-    MIN_RESOLVABLE,
+    declare_at, distinct_best, grid_at, located_draw, on_bound, one_station, pattern,
+    position_params, refine, resample_at, resolvable, station_share, translations, unresolvable,
+    with_translations, MIN_RESOLVABLE,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
@@ -473,7 +473,9 @@ impl Family<GnssResiduals> for LastingSource {
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
         let loc = res.locating();
-        on_bound(&lasting_grid(loc).points, fit.pos).or_else(|| unresolvable(loc, fit.pos))
+        on_bound(&lasting_grid(loc).points, fit.pos)
+            .or_else(|| unresolvable(loc, fit.pos))
+            .or_else(|| one_station(loc, fit.pos))
     }
     /// Position, and the depth's natural logarithm: the depth's error grows with the depth, and
     /// found depths lie shallow of the truth more often than deep (README, *Blind spots*), so its

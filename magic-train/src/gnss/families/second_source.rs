@@ -411,9 +411,8 @@ pub fn resolvable(res: &GnssResiduals, pos: [f64; 3]) -> f64 {
 }
 
 /// Why a second source at `pos` is not a discovery: its field mostly a move of the main source
-/// and a change of the declared ones ([`resolvable`] below [`MIN_RESOLVABLE`]), F declares
-/// a source the main one trades with ([`MIN_RESOLVABLE_DECLARED`]), or one station sees it
-/// alone ([`station_share`] above [`MAX_STATION_SHARE`]).
+/// and a change of the declared ones ([`resolvable`] below [`MIN_RESOLVABLE`]), or F declares
+/// a source the main one trades with ([`MIN_RESOLVABLE_DECLARED`]).
 pub(super) fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
     if let Some(share) = res.ctx.trading {
         return Some(Rejection::BesideTrade {
@@ -422,13 +421,18 @@ pub(super) fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejecti
         });
     }
     let share = resolvable(res, pos);
-    if share < MIN_RESOLVABLE {
-        return Some(Rejection::Unresolvable {
-            share,
-            least: MIN_RESOLVABLE,
-            beside_declared: res.ctx.sources_span.len() > res.ctx.source_span.len(),
-        });
-    }
+    (share < MIN_RESOLVABLE).then_some(Rejection::Unresolvable {
+        share,
+        least: MIN_RESOLVABLE,
+        beside_declared: res.ctx.sources_span.len() > res.ctx.source_span.len(),
+    })
+}
+
+/// Why a source found at `pos` is no discovery though the search may keep it: one station sees
+/// it alone ([`station_share`] above [`MAX_STATION_SHARE`]). Judged on the found source only,
+/// not in the search: there it would move the surrogates' fits, too, to places several stations
+/// see, where they score higher, and raise the chance level every source is judged against.
+pub(super) fn one_station(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
     let (station, share) = station_share(res, pos);
     (share > MAX_STATION_SHARE).then(|| Rejection::OneStation {
         station: res.ctx.network.names[station].clone(),
@@ -569,9 +573,10 @@ impl Family<GnssResiduals> for SecondSource {
     }
     /// On the bound of its grid, or its field mostly a move of the main source: scored where the
     /// main source is held, such a move counts whole, and a main source that moves between its
-    /// episodes would show as a source beside it.
+    /// episodes would show as a source beside it. Or seen by one station ([`one_station`]).
     fn reject(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<Rejection> {
-        rejection(res.locating(), fit.pos)
+        let loc = res.locating();
+        rejection(loc, fit.pos).or_else(|| one_station(loc, fit.pos))
     }
     fn key_params(&self, _: &GnssResiduals, fit: &SourceFit) -> Vec<(&'static str, f64)> {
         position_params(fit.pos)
