@@ -432,7 +432,7 @@ pub(super) fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejecti
 /// it alone ([`station_share`] above [`MAX_STATION_SHARE`]). Judged on the found source only,
 /// not in the search: there it would move the surrogates' fits, too, to places several stations
 /// see, where they score higher, and raise the chance level every source is judged against.
-pub(super) fn one_station(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
+pub fn one_station(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
     let (station, share) = station_share(res, pos);
     (share > MAX_STATION_SHARE).then(|| Rejection::OneStation {
         station: res.ctx.network.names[station].clone(),
