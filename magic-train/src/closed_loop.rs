@@ -86,6 +86,9 @@ pub enum StopReason {
         /// Those among them found as another term than F's, of a family F holds as many of as
         /// the options allow ([`Analysis::beyond_capacity`](crate::analysis::Analysis::beyond_capacity)).
         beyond_capacity: Vec<String>,
+        /// F holds as many effects as a model file carries and one of them is another term
+        /// ([`Analysis::beyond_model_file`](crate::analysis::Analysis::beyond_model_file)).
+        full: bool,
     },
     /// The added effect did not lower B's validation MSE and was taken out again.
     NoValidationGain {
@@ -110,12 +113,17 @@ impl std::fmt::Display for StopReason {
             StopReason::NotDeclarable {
                 families,
                 beyond_capacity,
+                full,
             } => {
                 write!(
                     f,
                     "significant but not declarable as physics (or declared already): {}",
                     families.join(", ")
                 )?;
+                if *full {
+                    let most = magic_core::effects::MAX_EFFECTS;
+                    return write!(f, " (F holds {most} effects, the most a model file carries)");
+                }
                 let has = |names: &[&str]| beyond_capacity.iter().any(|x| names.contains(&&**x));
                 if has(&["second_source", "lasting_source"]) {
                     write!(f, " (another point source needs a larger --extra-sources)")?;
@@ -305,6 +313,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                     StopReason::NotDeclarable {
                         families: found,
                         beyond_capacity: analysis.beyond_capacity(&effects, &opts.analysis),
+                        full: analysis.beyond_model_file(&effects, &opts.analysis),
                     }
                 };
             }
@@ -353,14 +362,16 @@ mod tests {
 
     #[test]
     fn a_term_left_out_says_how_to_take_it() {
-        let stop = |f: &[&str], beyond: &[&str]| {
+        let stop_full = |f: &[&str], beyond: &[&str], full: bool| {
             let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect();
             StopReason::NotDeclarable {
                 families: names(f),
                 beyond_capacity: names(beyond),
+                full,
             }
             .to_string()
         };
+        let stop = |f: &[&str], beyond: &[&str]| stop_full(f, beyond, false);
         assert_eq!(
             stop(&["seasonal"], &[]),
             "significant but not declarable as physics (or declared already): seasonal"
@@ -370,5 +381,11 @@ mod tests {
         // A source found again where F has one is not a reason for another.
         assert!(!stop(&["lasting_source"], &[]).contains("--extra-sources"));
         assert!(stop(&["step"], &["step"]).ends_with("a larger --steps)"));
+        // With F full no option takes another term: the stop says so, not which option.
+        let full = stop_full(&["step"], &["step"], true);
+        assert!(
+            full.ends_with("(F holds 4 effects, the most a model file carries)"),
+            "{full}"
+        );
     }
 }

@@ -194,6 +194,18 @@ impl Analysis {
         out
     }
 
+    /// Whether F holds as many effects as a model file carries
+    /// ([`MAX_EFFECTS`](magic_core::effects::MAX_EFFECTS)) while a significant candidate is
+    /// another term than F's: no option takes it then.
+    pub fn beyond_model_file(&self, declared: &[OwnedEffect], opts: &AnalysisOptions) -> bool {
+        let other = |e: &OwnedEffect| term(declared, e, opts) != Term::Declared;
+        declared.len() >= magic_core::effects::MAX_EFFECTS
+            && self
+                .effects
+                .iter()
+                .any(|c| c.significant && c.effect.as_ref().is_some_and(other))
+    }
+
     /// The JSON report (`{"effects": [{"family", "variance_explained", "chance_level",
     /// "significant", "params", …}, …], "residuals": {…}, …}`).
     pub fn to_json(&self) -> serde_json::Value {
@@ -425,5 +437,20 @@ mod tests {
         assert!(analysis
             .beyond_capacity(&[step(4, 15_090.0)], &one)
             .is_empty());
+        // F full: a step elsewhere is beyond the model file, whatever `--steps` allows; one
+        // found again is not.
+        let four = AnalysisOptions {
+            steps: 4,
+            ..AnalysisOptions::default()
+        };
+        let three = [
+            step(1, 15_100.0),
+            step(2, 15_100.0),
+            OwnedEffect::CommonMode,
+        ];
+        let with = |last: OwnedEffect| [three.as_slice(), &[last]].concat();
+        assert!(analysis.beyond_model_file(&with(step(3, 15_100.0)), &four));
+        assert!(!analysis.beyond_model_file(&with(step(4, 15_090.0)), &four));
+        assert!(!analysis.beyond_model_file(&three, &four));
     }
 }

@@ -142,3 +142,30 @@ impl JsonOut {
 pub fn write_file(path: &Path, text: impl AsRef<[u8]>) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
 }
+
+/// Parses a count of terms F may hold of one family (`--extra-sources`, `--steps`): at most
+/// [`MAX_EFFECTS`](magic_core::effects::MAX_EFFECTS), the effects a model file carries.
+pub fn terms(s: &str) -> std::result::Result<usize, String> {
+    let most = magic_core::effects::MAX_EFFECTS;
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a whole number"))?;
+    if n > most {
+        return Err(format!(
+            "{n} is more than F can hold: a model file carries at most {most} effects"
+        ));
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn terms_are_counted_up_to_what_a_model_file_carries() {
+        assert_eq!(super::terms("0"), Ok(0));
+        assert_eq!(super::terms("4"), Ok(4));
+        let more = super::terms("5").unwrap_err();
+        assert!(more.contains("at most 4 effects"), "{more}");
+        assert!(super::terms("two").unwrap_err().contains("`two`"));
+    }
+}

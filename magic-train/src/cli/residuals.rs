@@ -40,7 +40,7 @@ pub struct ResidualsCmd {
     /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
     /// first only where the main source does not trade with that one; measured in the README,
     /// *A second source term in F*).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::args::terms)]
     extra_sources: usize,
     #[command(flatten)]
     json: JsonOut,
