@@ -50,6 +50,9 @@ pub struct Scores {
     pub correction_ms: f64,
     /// The problem's metrics.
     pub metrics: Vec<Metric>,
+    /// The epoch (1-based) whose weights were kept: the lowest validation loss (early
+    /// stopping). An effect acting in the validation years moves it.
+    pub best_epoch: usize,
 }
 
 /// One round of the loop.
@@ -203,8 +206,12 @@ impl LoopReport {
     }
 }
 
-/// Scores a trained model on the problem's data.
-pub fn scores<P: Problem + ?Sized>(problem: &P, m: &Model<'_>) -> Result<Scores> {
+/// Scores a trained model on the problem's data (`best_epoch`: from its training log).
+pub fn scores<P: Problem + ?Sized>(
+    problem: &P,
+    m: &Model<'_>,
+    best_epoch: usize,
+) -> Result<Scores> {
     let r = evaluate_splits(m, problem.data())?;
     let phys = |i: usize| r[i].physics_mse.unwrap_or(f64::NAN);
     Ok(Scores {
@@ -212,6 +219,7 @@ pub fn scores<P: Problem + ?Sized>(problem: &P, m: &Model<'_>) -> Result<Scores>
         physics: [phys(0), phys(1), phys(2)],
         correction_ms: r[2].correction_ms.unwrap_or(0.0),
         metrics: problem.metrics(m)?,
+        best_epoch,
     })
 }
 
@@ -225,10 +233,10 @@ fn train_pair<P: Problem + ?Sized>(
     tag: &str,
 ) -> Result<[(Scores, Vec<u8>); 2]> {
     let one = |kind: ModelKind| -> Result<(Scores, Vec<u8>)> {
-        let (m, _) = train_model(problem, kind, effects, &opts.train, opts.seed)?;
+        let (m, log) = train_model(problem, kind, effects, &opts.train, opts.seed)?;
         let bytes = m.encode()?;
         std::fs::write(dir.join(format!("{tag}_{kind:?}.magic")), &bytes)?;
-        let s = scores(problem, &Model::decode(&bytes)?)?;
+        let s = scores(problem, &Model::decode(&bytes)?, log.best_epoch)?;
         Ok((s, bytes))
     };
     Ok([one(ModelKind::B)?, one(ModelKind::C)?])
