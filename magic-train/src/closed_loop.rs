@@ -50,8 +50,9 @@ pub struct Scores {
     pub correction_ms: f64,
     /// The problem's metrics.
     pub metrics: Vec<Metric>,
-    /// The epoch (1-based) whose weights were kept: the lowest validation loss (early
-    /// stopping). An effect acting in the validation years moves it.
+    /// The epoch (1-based) whose weights were kept: the lowest validation loss after the
+    /// recipe's warm-up (early stopping). Before the warm-up, an effect acting in the
+    /// validation years moved it to a lucky early epoch and decided the keep rule.
     pub best_epoch: usize,
 }
 

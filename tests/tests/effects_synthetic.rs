@@ -25,6 +25,7 @@ fn check(scenario: Scenario) {
 fn check_with(scenario: Scenario, opts: &AnalysisOptions) {
     let cfg = TrainConfig {
         epochs: 15,
+        warmup: 0,
         progress: false,
         ..TrainConfig::gnss()
     };
@@ -127,6 +128,7 @@ fn fitted_effect_reproduces_the_fit() {
     // effect evaluated after the epoch minus before equals the offset in mm.
     let cfg = TrainConfig {
         epochs: 15,
+        warmup: 0,
         progress: false,
         ..TrainConfig::gnss()
     };

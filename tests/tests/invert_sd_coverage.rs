@@ -7,7 +7,7 @@
 //!
 //! Seeds from `MAGIC_SD_SEEDS` (default 11–15; the README reports 1–10). The bounds below are
 //! loose (raw Laplace standard deviations are expected to be somewhat small: the encoder's answer
-//! is not the least-squares optimum), set on seeds 1–10, where the pooled shares were 54–60 %
+//! is not the least-squares optimum), set on seeds 1–10, where the pooled shares were 54–61 %
 //! within ±1 sd and 87–91 % within ±2 sd.
 
 use magic_core::uncertainty::{standard_deviations, SdWorkspace};

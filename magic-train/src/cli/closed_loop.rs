@@ -51,6 +51,10 @@ pub struct LoopCmd {
     /// Maximum epochs per training.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
+    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
+    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
+    #[arg(long)]
+    warmup: Option<usize>,
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
@@ -65,7 +69,7 @@ pub fn run(a: &LoopCmd) -> Result<()> {
     let r = with_problem!(&p, |p| {
         let opts = LoopOptions {
             seed: a.seed,
-            train: p.recipe().with(a.epochs, false),
+            train: p.recipe().with(a.epochs, false).with_warmup(a.warmup),
             max_rounds: a.rounds,
             baseline: !a.no_classical,
             analysis: AnalysisOptions {

@@ -29,6 +29,10 @@ pub struct ReproduceCmd {
     /// Maximum epochs.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
+    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
+    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
+    #[arg(long)]
+    warmup: Option<usize>,
     /// Training runs per model and seed; the one with the lowest validation MSE is kept (1: the
     /// paper's single run).
     #[arg(long, default_value_t = 1)]
@@ -46,7 +50,11 @@ pub fn run(a: &ReproduceCmd) -> Result<()> {
         } else {
             a.kinds.clone()
         };
-        let cfg = p.recipe().with(a.epochs, false).with_restarts(a.restarts);
+        let cfg = p
+            .recipe()
+            .with(a.epochs, false)
+            .with_restarts(a.restarts)
+            .with_warmup(a.warmup);
         table(p, &kinds, &a.seeds, &cfg)?
     });
     a.json.write(&v)

@@ -125,6 +125,10 @@ pub struct SynthCheckCmd {
     /// Training epochs of the B models.
     #[arg(long, default_value_t = 15)]
     epochs: usize,
+    /// Epochs early stopping does not watch (0: every epoch, as the paper; B's brief training
+    /// ends before the learning-rate step the recipe's warm-up waits for).
+    #[arg(long, default_value_t = 0)]
+    warmup: usize,
     /// The volcano's main source in the residual analysis: `free` to move every day (whatever
     /// moving it produces is projected off; point sources are located and scored with it held) or
     /// `held` in place (only its field's direction is projected off, so a second source near
@@ -141,7 +145,9 @@ pub struct SynthCheckCmd {
 /// Runs `magic synth-check`: for every scenario, noise model, placement and seed, generate the
 /// data, train a B model briefly, analyse it and compare with the injected truth.
 pub fn check(a: &SynthCheckCmd) -> Result<()> {
-    let cfg = crate::train::TrainConfig::gnss().with(a.epochs, true);
+    let cfg = crate::train::TrainConfig::gnss()
+        .with(a.epochs, true)
+        .with_warmup(Some(a.warmup));
     let opts = AnalysisOptions {
         main_source: a.main_source,
         ..AnalysisOptions::default()
@@ -223,6 +229,10 @@ pub struct SynthLoopCmd {
     /// Maximum epochs per training.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
+    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
+    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
+    #[arg(long)]
+    warmup: Option<usize>,
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
@@ -278,7 +288,11 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
         let s = spec.generate();
         let opts = LoopOptions {
             seed,
-            train: s.problem.recipe().with(a.epochs, true),
+            train: s
+                .problem
+                .recipe()
+                .with(a.epochs, true)
+                .with_warmup(a.warmup),
             max_rounds: a.rounds,
             baseline: false,
             analysis: AnalysisOptions {

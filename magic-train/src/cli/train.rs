@@ -31,6 +31,10 @@ pub struct Common {
     /// Maximum epochs.
     #[arg(long, default_value_t = 100)]
     pub epochs: usize,
+    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
+    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
+    #[arg(long)]
+    pub warmup: Option<usize>,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -134,6 +138,7 @@ pub fn run(cmd: &TrainCmd) -> Result<()> {
                 ..p.recipe()
                     .with(common.epochs, false)
                     .with_restarts(common.restarts)
+                    .with_warmup(common.warmup)
             };
             let effects: Vec<_> = effects.iter().map(|e| p.latent_effect(*e)).collect();
             finish(&p, common, &effects, &cfg)
@@ -151,7 +156,8 @@ pub fn run(cmd: &TrainCmd) -> Result<()> {
             let cfg = p
                 .recipe()
                 .with(common.epochs, false)
-                .with_restarts(common.restarts);
+                .with_restarts(common.restarts)
+                .with_warmup(common.warmup);
             let effects: Vec<_> = effects.iter().map(|e| p.effect(*e)).collect();
             finish(&p, common, &effects, &cfg)
         }

@@ -740,7 +740,7 @@ mod tests {
         use crate::gnss::synth::{Scenario, Spec};
         use crate::train::{train_model, ModelKind, TrainConfig};
         use magic_core::Model;
-        let cfg = TrainConfig::gnss().with(15, true);
+        let cfg = TrainConfig::gnss().with(15, true).with_warmup(Some(0));
         let opts = AnalysisOptions::default();
         for seed in 101..=104 {
             let spec = Spec::new(Scenario::parse("lasting_deflation_far").unwrap(), seed);
