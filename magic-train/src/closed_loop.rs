@@ -51,8 +51,8 @@ pub struct Scores {
     /// The problem's metrics.
     pub metrics: Vec<Metric>,
     /// The epoch (1-based) whose weights were kept: the lowest validation loss after the
-    /// recipe's warm-up (early stopping). Before the warm-up, an effect acting in the
-    /// validation years moved it to a lucky early epoch and decided the keep rule.
+    /// recipe's warm-up (early stopping). Without a warm-up, an effect acting in the
+    /// validation years could move it to a lucky early epoch and so decide the keep rule.
     pub best_epoch: usize,
 }
 

@@ -88,10 +88,10 @@ pub struct TrainConfig {
 }
 
 impl TrainConfig {
-    /// The paper's GNSS recipe: batches of 12 sequences × 5 consecutive days, λ = 0.01, with
-    /// one difference: early stopping watches from the learning-rate step on (`warmup` 50; the
-    /// paper's rule, 0, lets a lucky epoch of the noisy high-rate phase end the run: measured
-    /// in the README, *Table 4*).
+    /// The paper's GNSS recipe: batches of 12 sequences × 5 consecutive days, λ = 0.01, and
+    /// early stopping that watches from the learning-rate step on (`warmup` 50; the paper's
+    /// rule, 0, lets a lucky epoch of the noisy high-rate phase end the run: measured in the
+    /// README, *Table 4*).
     pub fn gnss() -> Self {
         TrainConfig {
             epochs: 100,
