@@ -454,14 +454,14 @@ pub fn fit(
         let train_loss = loss_sum / batches.max(1) as f64;
         log.history.push((train_loss, v));
         log.epochs = epoch;
-        if epoch < watch_from {
-            // the warm-up: neither kept nor counted towards the patience
-        } else if v < log.best_valid {
+        // The warm-up's epochs are neither kept nor counted towards the patience.
+        let watched = epoch >= watch_from;
+        if watched && v < log.best_valid {
             log.best_valid = v;
             log.best_epoch = epoch;
             best = net.snapshot()?;
             since_best = 0;
-        } else {
+        } else if watched {
             since_best += 1;
         }
         bar.set_message(format!("loss {train_loss:.4} valid {v:.4}"));

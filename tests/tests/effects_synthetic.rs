@@ -7,9 +7,9 @@
 //! be significant. Two seeds per family; `magic synth-check --seeds 10` runs the full table (with
 //! placements, two effects at once and a second noise model).
 
-use magic_train::gnss::recovery::check_one;
+use magic_train::gnss::recovery::{brief_recipe, check_one};
 use magic_train::gnss::synth::{self, Scenario, Spec};
-use magic_train::{AnalysisOptions, OwnedEffect, TrainConfig};
+use magic_train::{AnalysisOptions, OwnedEffect};
 
 /// The step offset in the analysis report (JSON) against the effect's f32 offset (mm): the report
 /// rounds to 3 decimals (±5e-4 mm), the effect holds f32; measured 2.5e-4.
@@ -23,12 +23,7 @@ fn check(scenario: Scenario) {
 }
 
 fn check_with(scenario: Scenario, opts: &AnalysisOptions) {
-    let cfg = TrainConfig {
-        epochs: 15,
-        warmup: 0,
-        progress: false,
-        ..TrainConfig::gnss()
-    };
+    let cfg = brief_recipe();
     for seed in [1, 2] {
         let spec = Spec::new(scenario, seed);
         let check = check_one(&spec, &cfg, opts).unwrap();
@@ -126,12 +121,7 @@ fn a_near_source_is_found_where_the_main_source_is_held() {
 fn fitted_effect_reproduces_the_fit() {
     // A step found by the analysis, added to F, reproduces the offset it measured: F with the
     // effect evaluated after the epoch minus before equals the offset in mm.
-    let cfg = TrainConfig {
-        epochs: 15,
-        warmup: 0,
-        progress: false,
-        ..TrainConfig::gnss()
-    };
+    let cfg = brief_recipe();
     let a = check_one(
         &Spec::new(Scenario::Step, 1),
         &cfg,

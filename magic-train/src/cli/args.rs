@@ -119,6 +119,22 @@ pub fn decode<'a>(path: &Path, bytes: &'a [u8]) -> Result<Model<'a>> {
     Model::decode(bytes).with_context(|| format!("{}: not a usable model file", path.display()))
 }
 
+/// The warm-up of early stopping (`--warmup`), on every command that trains with a recipe.
+#[derive(Args, Clone, Copy, Debug, Default)]
+pub struct Warmup {
+    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
+    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
+    #[arg(long)]
+    warmup: Option<usize>,
+}
+
+impl Warmup {
+    /// The epochs given, or `None` for the recipe's.
+    pub fn get(self) -> Option<usize> {
+        self.warmup
+    }
+}
+
 /// Where to write JSON.
 #[derive(Args, Clone, Debug, Default)]
 pub struct JsonOut {

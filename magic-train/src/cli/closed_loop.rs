@@ -1,7 +1,7 @@
 //! `magic loop mogi|rtm`: close the loop — train, trace the residual to a missing effect, add it
 //! to F, retrain, report.
 
-use super::args::{DataArgs, ProblemArg};
+use super::args::{DataArgs, ProblemArg, Warmup};
 use crate::analysis::{AnalysisOptions, MainSource};
 use crate::closed_loop::{run as run_loop, LoopOptions};
 use crate::problem::Problem;
@@ -51,10 +51,8 @@ pub struct LoopCmd {
     /// Maximum epochs per training.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
-    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
-    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
-    #[arg(long)]
-    warmup: Option<usize>,
+    #[command(flatten)]
+    warmup: Warmup,
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
@@ -69,7 +67,7 @@ pub fn run(a: &LoopCmd) -> Result<()> {
     let r = with_problem!(&p, |p| {
         let opts = LoopOptions {
             seed: a.seed,
-            train: p.recipe().with(a.epochs, false).with_warmup(a.warmup),
+            train: p.recipe().with(a.epochs, false).with_warmup(a.warmup.get()),
             max_rounds: a.rounds,
             baseline: !a.no_classical,
             analysis: AnalysisOptions {

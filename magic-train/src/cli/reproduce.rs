@@ -1,6 +1,6 @@
 //! `magic reproduce mogi|rtm`: a table of the paper over several seeds (mean ± std).
 
-use super::args::{DataArgs, JsonOut, ProblemArg};
+use super::args::{DataArgs, JsonOut, ProblemArg, Warmup};
 use crate::problem::Problem;
 use crate::reproduce::table;
 use crate::rtm::GeometryArg;
@@ -29,10 +29,8 @@ pub struct ReproduceCmd {
     /// Maximum epochs.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
-    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
-    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
-    #[arg(long)]
-    warmup: Option<usize>,
+    #[command(flatten)]
+    warmup: Warmup,
     /// Training runs per model and seed; the one with the lowest validation MSE is kept (1: the
     /// paper's single run).
     #[arg(long, default_value_t = 1)]
@@ -54,7 +52,7 @@ pub fn run(a: &ReproduceCmd) -> Result<()> {
             .recipe()
             .with(a.epochs, false)
             .with_restarts(a.restarts)
-            .with_warmup(a.warmup);
+            .with_warmup(a.warmup.get());
         table(p, &kinds, &a.seeds, &cfg)?
     });
     a.json.write(&v)

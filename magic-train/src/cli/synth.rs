@@ -1,7 +1,7 @@
 //! `magic synth`, `magic synth-check`, `magic synth-loop`: synthetic GNSS data with injected
 //! effects, and how well the analysis and the loop recover them.
 
-use super::args::{write_file, JsonOut};
+use super::args::{write_file, JsonOut, Warmup};
 use crate::analysis::{AnalysisOptions, MainSource};
 use crate::closed_loop::{self, LoopOptions};
 use crate::data::SplitName;
@@ -123,7 +123,7 @@ pub struct SynthCheckCmd {
     #[arg(long, value_enum, value_delimiter = ',', default_value = "train")]
     placement: Vec<SplitName>,
     /// Training epochs of the B models.
-    #[arg(long, default_value_t = 15)]
+    #[arg(long, default_value_t = crate::gnss::recovery::BRIEF_EPOCHS)]
     epochs: usize,
     /// Epochs early stopping does not watch (0: every epoch, as the paper; B's brief training
     /// ends before the learning-rate step the recipe's warm-up waits for).
@@ -145,7 +145,7 @@ pub struct SynthCheckCmd {
 /// Runs `magic synth-check`: for every scenario, noise model, placement and seed, generate the
 /// data, train a B model briefly, analyse it and compare with the injected truth.
 pub fn check(a: &SynthCheckCmd) -> Result<()> {
-    let cfg = crate::train::TrainConfig::gnss()
+    let cfg = crate::gnss::recovery::brief_recipe()
         .with(a.epochs, true)
         .with_warmup(Some(a.warmup));
     let opts = AnalysisOptions {
@@ -229,10 +229,8 @@ pub struct SynthLoopCmd {
     /// Maximum epochs per training.
     #[arg(long, default_value_t = 100)]
     epochs: usize,
-    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
-    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
-    #[arg(long)]
-    warmup: Option<usize>,
+    #[command(flatten)]
+    warmup: Warmup,
     /// Most effects to add.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
@@ -292,7 +290,7 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
                 .problem
                 .recipe()
                 .with(a.epochs, true)
-                .with_warmup(a.warmup),
+                .with_warmup(a.warmup.get()),
             max_rounds: a.rounds,
             baseline: false,
             analysis: AnalysisOptions {

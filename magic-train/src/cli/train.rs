@@ -1,6 +1,6 @@
 //! `magic train mogi|rtm`: train a model of a kind and write its f32 model file.
 
-use super::args::{write_file, DataArgs};
+use super::args::{write_file, DataArgs, Warmup};
 use crate::gnss::LatentEffect;
 use crate::problem::Problem;
 use crate::rtm::{GeometryArg, RtmEffect};
@@ -31,10 +31,9 @@ pub struct Common {
     /// Maximum epochs.
     #[arg(long, default_value_t = 100)]
     pub epochs: usize,
-    /// Epochs early stopping does not watch, their weights never kept (default: the recipe's,
-    /// the volcano's learning-rate step 50, the forest's 0; 0 is the paper's rule).
-    #[arg(long)]
-    pub warmup: Option<usize>,
+    /// Epochs early stopping does not watch.
+    #[command(flatten)]
+    pub warmup: Warmup,
     /// Random seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -138,7 +137,7 @@ pub fn run(cmd: &TrainCmd) -> Result<()> {
                 ..p.recipe()
                     .with(common.epochs, false)
                     .with_restarts(common.restarts)
-                    .with_warmup(common.warmup)
+                    .with_warmup(common.warmup.get())
             };
             let effects: Vec<_> = effects.iter().map(|e| p.latent_effect(*e)).collect();
             finish(&p, common, &effects, &cfg)
@@ -157,7 +156,7 @@ pub fn run(cmd: &TrainCmd) -> Result<()> {
                 .recipe()
                 .with(common.epochs, false)
                 .with_restarts(common.restarts)
-                .with_warmup(common.warmup);
+                .with_warmup(common.warmup.get());
             let effects: Vec<_> = effects.iter().map(|e| p.effect(*e)).collect();
             finish(&p, common, &effects, &cfg)
         }

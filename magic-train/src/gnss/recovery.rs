@@ -410,6 +410,18 @@ impl Recovery {
     }
 }
 
+/// The epochs B trains for in a recovery check (`magic synth-check`'s default).
+pub const BRIEF_EPOCHS: usize = 15;
+
+/// B's training in a recovery check: the volcano recipe for [`BRIEF_EPOCHS`] epochs, every epoch
+/// watched as in the paper (the recipe's warm-up waits for a learning-rate step so brief a run
+/// never reaches), without a progress bar.
+pub fn brief_recipe() -> TrainConfig {
+    TrainConfig::gnss()
+        .with(BRIEF_EPOCHS, true)
+        .with_warmup(Some(0))
+}
+
 /// Generates a dataset, trains a B model on it (seeded with the dataset's seed) and analyses
 /// its residuals.
 pub fn check_one(spec: &Spec, cfg: &TrainConfig, opts: &AnalysisOptions) -> Result<Check> {

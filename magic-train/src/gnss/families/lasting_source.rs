@@ -737,10 +737,11 @@ mod tests {
     #[test]
     fn search_finds_a_noise_free_change_where_it_is() {
         use crate::analysis::{AnalysisOptions, MainSource};
+        use crate::gnss::recovery::brief_recipe;
         use crate::gnss::synth::{Scenario, Spec};
-        use crate::train::{train_model, ModelKind, TrainConfig};
+        use crate::train::{train_model, ModelKind};
         use magic_core::Model;
-        let cfg = TrainConfig::gnss().with(15, true).with_warmup(Some(0));
+        let cfg = brief_recipe();
         let opts = AnalysisOptions::default();
         for seed in 101..=104 {
             let spec = Spec::new(Scenario::parse("lasting_deflation_far").unwrap(), seed);
