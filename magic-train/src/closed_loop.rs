@@ -7,18 +7,22 @@
 //! [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
 //! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
 //! significance in the residuals is necessary, not sufficient; an effect that does not is taken
-//! out again and the loop stops. The loop ends with a [`StopReason`] the report prints. Effects
+//! out again and the loop stops. An effect that starts after the training years (a step in the
+//! validation years) is zero on every training row, so retraining cannot learn it: it is judged
+//! by B without and with it trained on interleaved blocks of the training and validation rows
+//! ([`interleaved`]). The loop ends with a [`StopReason`] the report prints. Effects
 //! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
 //! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
 //! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
 //! where the problem has one, a classical baseline with the same declared effects.
 
 use crate::analysis::{analyse, AnalysisOptions, Candidate};
-use crate::eval::evaluate_splits;
+use crate::data::{interleaved, Split};
+use crate::eval::{evaluate, evaluate_splits};
 use crate::model::OwnedEffect;
 use crate::problem::{Metric, Problem};
 use crate::report;
-use crate::train::{train_model, ModelKind, TrainConfig};
+use crate::train::{train_model, train_model_on, ModelKind, TrainConfig};
 use anyhow::{Context, Result};
 use magic_core::Model;
 use serde::Serialize;
@@ -75,6 +79,22 @@ pub struct Round {
     pub candidates: Vec<Candidate>,
     /// Whether this round's F was kept (false when its added effect was taken out again).
     pub kept: bool,
+    /// How the keep rule judged the added effect when it starts after the training years.
+    pub interleaved: Option<Interleaved>,
+}
+
+/// Rows per block when the keep rule deals the training and validation rows out again: two
+/// months of daily rows, a whole number of the GNSS recipe's 5-day sequences.
+pub const KEEP_BLOCK_ROWS: usize = 60;
+
+/// The keep rule for an effect that starts after the training years: B's validation MSE without
+/// and with it, both trained on the same interleaved blocks ([`interleaved`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct Interleaved {
+    /// Rows per block.
+    pub block: usize,
+    /// B's validation MSE on the blocks held out, without and with the effect.
+    pub valid: [f64; 2],
 }
 
 /// Why the loop stopped.
@@ -100,6 +120,9 @@ pub enum StopReason {
         family: String,
         /// B's validation MSE before and after adding it.
         valid: [f64; 2],
+        /// Whether they come from interleaved blocks (the effect starts after the training
+        /// years).
+        interleaved: bool,
     },
     /// The round limit was reached.
     RoundLimit {
@@ -126,7 +149,10 @@ impl std::fmt::Display for StopReason {
                 )?;
                 if *full {
                     let most = magic_core::effects::MAX_EFFECTS;
-                    return write!(f, " (F holds {most} effects, the most a model file carries)");
+                    return write!(
+                        f,
+                        " (F holds {most} effects, the most a model file carries)"
+                    );
                 }
                 let has = |names: &[&str]| beyond_capacity.iter().any(|x| names.contains(&&**x));
                 if has(&["second_source", "lasting_source"]) {
@@ -137,11 +163,22 @@ impl std::fmt::Display for StopReason {
                 }
                 Ok(())
             }
-            StopReason::NoValidationGain { family, valid } => write!(
-                f,
-                "{family} did not lower B's validation MSE ({:.4} → {:.4}) and was taken out of F again",
-                valid[0], valid[1]
-            ),
+            StopReason::NoValidationGain {
+                family,
+                valid,
+                interleaved,
+            } => {
+                let on = if *interleaved {
+                    " on interleaved blocks of the training and validation years (it starts after the training years)"
+                } else {
+                    ""
+                };
+                write!(
+                    f,
+                    "{family} did not lower B's validation MSE{on} ({:.4} → {:.4}) and was taken out of F again",
+                    valid[0], valid[1]
+                )
+            }
             StopReason::RoundLimit { rounds } => {
                 write!(f, "the round limit ({rounds}) was reached")
             }
@@ -243,6 +280,59 @@ fn train_pair<P: Problem + ?Sized>(
     Ok([one(ModelKind::B)?, one(ModelKind::C)?])
 }
 
+/// The last day (days since 1970-01-01) of a split's rows with a date.
+fn last_day(s: &Split) -> f64 {
+    s.days()
+        .into_iter()
+        .filter(|d| d.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// The keep rule's figures for the last of `effects` when it starts after the training years
+/// and the interleaved blocks put rows after its onset into training; `None` otherwise.
+/// `without`: B's validation MSE on the blocks without it, when known (training is repeatable).
+fn judge_interleaved<P: Problem + ?Sized>(
+    problem: &P,
+    effects: &[OwnedEffect],
+    without: Option<f64>,
+    opts: &LoopOptions,
+) -> Result<Option<Interleaved>> {
+    let Some((added, before)) = effects.split_last() else {
+        return Ok(None);
+    };
+    let Some(onset) = added.onset_day() else {
+        return Ok(None);
+    };
+    if last_day(&problem.data().train) >= onset {
+        return Ok(None);
+    }
+    let Some(data) = interleaved(problem.data(), KEEP_BLOCK_ROWS) else {
+        return Ok(None);
+    };
+    if last_day(&data.train) < onset {
+        return Ok(None);
+    }
+    eprintln!(
+        "{} starts after the training years: B without and with it on interleaved blocks of {KEEP_BLOCK_ROWS} rows",
+        added.family()
+    );
+    let valid = |effects: &[OwnedEffect]| -> Result<f64> {
+        let (m, _) = train_model_on(
+            problem,
+            &data,
+            ModelKind::B,
+            effects,
+            &opts.train,
+            opts.seed,
+        )?;
+        Ok(evaluate(&Model::decode(&m.encode()?)?, &data.valid, "valid")?.mse)
+    };
+    Ok(Some(Interleaved {
+        block: KEEP_BLOCK_ROWS,
+        valid: [without.map_or_else(|| valid(before), Ok)?, valid(effects)?],
+    }))
+}
+
 fn describe_f<P: Problem + ?Sized>(problem: &P, effects: &[OwnedEffect]) -> String {
     std::iter::once(problem.physics_name())
         .chain(effects.iter().map(OwnedEffect::family))
@@ -276,6 +366,11 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         };
         eprint!("{}", analysis.table());
         let previous_valid = rounds.last().map(|r: &Round| r.b.mse[1]);
+        // The last round kept was judged on the blocks: B on them with its effects is known.
+        let previous_blocks = rounds
+            .last()
+            .and_then(|r| r.interleaved.as_ref())
+            .map(|j| j.valid[1]);
         rounds.push(Round {
             round,
             effects: effects.iter().map(|e| e.family().to_string()).collect(),
@@ -285,17 +380,24 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
             baseline,
             candidates: analysis.effects.clone(),
             kept: true,
+            interleaved: None,
         });
         models.push(bbytes);
         let last = rounds.len() - 1;
         if let Some(before) = previous_valid {
-            let after = rounds[last].b.mse[1];
-            if after >= before {
+            let judged = judge_interleaved(problem, &effects, previous_blocks, opts)?;
+            let valid = judged
+                .as_ref()
+                .map_or([before, rounds[last].b.mse[1]], |j| j.valid);
+            let interleaved = judged.is_some();
+            rounds[last].interleaved = judged;
+            if valid[1] >= valid[0] {
                 let family = effects.pop().map_or("?".into(), |e| e.family().to_string());
                 rounds[last].kept = false;
                 break StopReason::NoValidationGain {
                     family,
-                    valid: [before, after],
+                    valid,
+                    interleaved,
                 };
             }
         }
@@ -367,7 +469,49 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
 
 #[cfg(test)]
 mod tests {
-    use super::StopReason;
+    use super::*;
+    use crate::gnss::synth::{Scenario, Spec};
+
+    #[test]
+    fn an_effect_after_the_training_years_is_judged_on_interleaved_blocks() {
+        let s = Spec::new(Scenario::Clean, 1).generate();
+        let data = s.problem.data();
+        let step = |day: f64| OwnedEffect::Step {
+            station: 0,
+            epoch_day: day as f32,
+            offset_mm: [0.0, 0.0, 5.0],
+        };
+        let opts = LoopOptions {
+            seed: 1,
+            train: TrainConfig {
+                epochs: 2,
+                warmup: 0,
+                progress: false,
+                ..TrainConfig::gnss()
+            },
+            max_rounds: 1,
+            baseline: false,
+            analysis: AnalysisOptions::default(),
+        };
+        let judge =
+            |effects: &[OwnedEffect]| judge_interleaved(&s.problem, effects, None, &opts).unwrap();
+        let after = last_day(&data.train) + 30.0;
+        let j = judge(&[OwnedEffect::CommonMode, step(after)]).expect("judged on blocks");
+        assert_eq!(j.block, KEEP_BLOCK_ROWS);
+        assert!(j.valid.iter().all(|v| v.is_finite() && *v > 0.0), "{j:?}");
+        // Training is repeatable, so a known B without the effect stands in for a retraining.
+        let again = judge_interleaved(
+            &s.problem,
+            &[OwnedEffect::CommonMode, step(after)],
+            Some(j.valid[0]),
+            &opts,
+        );
+        assert_eq!(again.unwrap().unwrap().valid, j.valid);
+        // Within the training years, without an onset, or after every row: the plain rule.
+        assert!(judge(&[step(last_day(&data.train) - 30.0)]).is_none());
+        assert!(judge(&[OwnedEffect::CommonMode]).is_none());
+        assert!(judge(&[step(last_day(&data.valid) + 1.0)]).is_none());
+    }
 
     #[test]
     fn a_term_left_out_says_how_to_take_it() {

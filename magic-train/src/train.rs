@@ -12,6 +12,7 @@
 //! the f32 model file. The paper used PyTorch's Adam with (coupled) L2 weight decay; candle offers
 //! AdamW (decoupled decay), which is what is used here.
 
+use crate::data::Dataset;
 use crate::model::{OwnedEffect, OwnedModel};
 use crate::nets::{days_tensor, mse, smoothness, to_tensor, Net};
 use crate::physics::Physics;
@@ -490,10 +491,23 @@ pub fn train_model<P: Problem + ?Sized>(
     cfg: &TrainConfig,
     seed: u64,
 ) -> Result<(OwnedModel, TrainLog)> {
+    train_model_on(problem, problem.data(), kind, effects, cfg, seed)
+}
+
+/// [`train_model`] on other splits of the problem's observations (the loop's keep rule for an
+/// effect that starts after the training years: [`crate::data::interleaved`]).
+pub fn train_model_on<P: Problem + ?Sized>(
+    problem: &P,
+    data: &Dataset,
+    kind: ModelKind,
+    effects: &[OwnedEffect],
+    cfg: &TrainConfig,
+    seed: u64,
+) -> Result<(OwnedModel, TrainLog)> {
     let mut best: Option<(OwnedModel, TrainLog)> = None;
     let mut valid = Vec::new();
     for r in 0..cfg.restarts.max(1) {
-        let (model, log) = train_once(problem, kind, effects, cfg, restart_seed(seed, r))?;
+        let (model, log) = train_once(problem, data, kind, effects, cfg, restart_seed(seed, r))?;
         valid.push(log.best_valid);
         if best
             .as_ref()
@@ -520,6 +534,7 @@ pub fn restart_seed(seed: u64, r: usize) -> u64 {
 /// One training run from `seed`.
 fn train_once<P: Problem + ?Sized>(
     problem: &P,
+    data: &Dataset,
     kind: ModelKind,
     effects: &[OwnedEffect],
     cfg: &TrainConfig,
@@ -530,7 +545,6 @@ fn train_once<P: Problem + ?Sized>(
     }
     problem.check_effects(effects)?;
     let mut rng = StdRng::seed_from_u64(seed);
-    let data = problem.data();
     let physics = problem.physics(effects)?;
     let bounds = problem.bounds(effects);
     let net = Net::new(

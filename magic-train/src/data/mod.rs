@@ -2,10 +2,12 @@
 //! CSV tables with located errors, and observation/result rows of `magic invert`.
 
 pub mod dataset;
+mod interleave;
 pub mod records;
 pub mod table;
 
 pub use dataset::{day_number, Dataset, Split, SplitName};
+pub use interleave::interleaved;
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};

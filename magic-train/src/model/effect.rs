@@ -177,6 +177,15 @@ impl OwnedEffect {
         self.borrow(&[]).family()
     }
 
+    /// The first day (days since 1970-01-01) on which the term can differ from zero, for an
+    /// effect with an onset (a step); `None` for one that acts on every row.
+    pub fn onset_day(&self) -> Option<f64> {
+        match self {
+            OwnedEffect::Step { epoch_day, .. } => Some(*epoch_day as f64),
+            _ => None,
+        }
+    }
+
     /// Whether `other` is the same term of F: two second sources less than [`SAME_SOURCE_KM`]
     /// apart horizontally (a source's depth is the least resolved of its coordinates), two steps
     /// at one station less than [`SAME_STEP_DAYS`] apart, any two other effects of one family.

@@ -117,6 +117,15 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
         l.stop
     );
     for r in &l.rounds {
+        if let Some(j) = &r.interleaved {
+            let _ = writeln!(
+                md,
+                "\nRound {}'s effect starts after the training years, so retraining on them cannot learn it: the keep rule compared B without and with it, both trained on blocks of {} rows of the training and validation years dealt out again (validation MSE {:.4} → {:.4}).",
+                r.round, j.block, j.valid[0], j.valid[1]
+            );
+        }
+    }
+    for r in &l.rounds {
         let _ = writeln!(md, "\n## Round {}: B's residuals\n", r.round);
         let rows: Vec<Vec<String>> = r
             .candidates
