@@ -7,8 +7,9 @@
 //! [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
 //! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
 //! significance in the residuals is necessary, not sufficient; an effect that does not is taken
-//! out again and the loop stops. An effect that starts after the training years (a step in the
-//! validation years) is zero on every training row, so retraining cannot learn it: it is judged
+//! out again and the loop stops. An effect that starts after the training years (a step or a
+//! source's change in the validation years) is one retraining on those years cannot learn: a
+//! step's term is zero on every training row, a source's volume never moves there. It is judged
 //! by B without and with it trained on interleaved blocks of the training and validation rows
 //! ([`interleaved`]). The loop ends with a [`StopReason`] the report prints. Effects
 //! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
@@ -169,7 +170,7 @@ impl std::fmt::Display for StopReason {
                 interleaved,
             } => {
                 let on = if *interleaved {
-                    " on interleaved blocks of the training and validation years (it starts after the training years)"
+                    " on interleaved blocks of the training and validation years, as it starts after the training years"
                 } else {
                     ""
                 };
@@ -288,19 +289,18 @@ fn last_day(s: &Split) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
-/// The keep rule's figures for the last of `effects` when it starts after the training years
-/// and the interleaved blocks put rows after its onset into training; `None` otherwise.
-/// `without`: B's validation MSE on the blocks without it, when known (training is repeatable).
+/// The keep rule's figures for the last of `effects`, found to start on day `onset`
+/// ([`Candidate::onset_day`]), when that is after the training years and the interleaved blocks
+/// put rows after it into training; `None` otherwise. `without`: B's validation MSE on the
+/// blocks without it, when known (training is repeatable).
 fn judge_interleaved<P: Problem + ?Sized>(
     problem: &P,
     effects: &[OwnedEffect],
+    onset: Option<f64>,
     without: Option<f64>,
     opts: &LoopOptions,
 ) -> Result<Option<Interleaved>> {
-    let Some((added, before)) = effects.split_last() else {
-        return Ok(None);
-    };
-    let Some(onset) = added.onset_day() else {
+    let (Some((added, before)), Some(onset)) = (effects.split_last(), onset) else {
         return Ok(None);
     };
     if last_day(&problem.data().train) >= onset {
@@ -385,7 +385,8 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         models.push(bbytes);
         let last = rounds.len() - 1;
         if let Some(before) = previous_valid {
-            let judged = judge_interleaved(problem, &effects, previous_blocks, opts)?;
+            let onset = rounds[last].added.as_ref().and_then(Candidate::onset_day);
+            let judged = judge_interleaved(problem, &effects, onset, previous_blocks, opts)?;
             let valid = judged
                 .as_ref()
                 .map_or([before, rounds[last].b.mse[1]], |j| j.valid);
@@ -493,8 +494,10 @@ mod tests {
             baseline: false,
             analysis: AnalysisOptions::default(),
         };
-        let judge =
-            |effects: &[OwnedEffect]| judge_interleaved(&s.problem, effects, None, &opts).unwrap();
+        let judge = |effects: &[OwnedEffect]| {
+            let onset = effects.last().and_then(OwnedEffect::onset_day);
+            judge_interleaved(&s.problem, effects, onset, None, &opts).unwrap()
+        };
         let after = last_day(&data.train) + 30.0;
         let j = judge(&[OwnedEffect::CommonMode, step(after)]).expect("judged on blocks");
         assert_eq!(j.block, KEEP_BLOCK_ROWS);
@@ -503,6 +506,7 @@ mod tests {
         let again = judge_interleaved(
             &s.problem,
             &[OwnedEffect::CommonMode, step(after)],
+            Some(after),
             Some(j.valid[0]),
             &opts,
         );
@@ -510,6 +514,17 @@ mod tests {
         // Within the training years, without an onset, or after every row: the plain rule.
         assert!(judge(&[step(last_day(&data.train) - 30.0)]).is_none());
         assert!(judge(&[OwnedEffect::CommonMode]).is_none());
+        // A source found to start after the training years ([`Candidate::onset_day`]).
+        let source = OwnedEffect::SecondSource {
+            x_km: 2.0,
+            y_km: -1.0,
+            depth_km: 4.0,
+        };
+        assert!(
+            judge_interleaved(&s.problem, &[source], Some(after), None, &opts)
+                .unwrap()
+                .is_some()
+        );
         assert!(judge(&[step(last_day(&data.valid) + 1.0)]).is_none());
     }
 

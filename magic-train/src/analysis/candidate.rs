@@ -171,6 +171,19 @@ impl Candidate {
         })
     }
 
+    /// The first day (days since 1970-01-01) the fitted effect acts on, for a dated one: a step's
+    /// epoch (its term is zero before), a source's `start` (the change or pulse found begins
+    /// there); `None` for an effect that acts on every row.
+    pub fn onset_day(&self) -> Option<f64> {
+        self.effect
+            .as_ref()
+            .and_then(OwnedEffect::onset_day)
+            .or_else(|| {
+                let start = self.params.get("start")?.as_str()?;
+                Some(crate::data::day_number(start)).filter(|d| d.is_finite())
+            })
+    }
+
     /// `family (explained vs chance)` with three decimals, as the loop tables print it.
     pub fn short(&self) -> String {
         format!(
@@ -219,5 +232,27 @@ mod tests {
         rank(&mut effects);
         let order: Vec<&str> = effects.iter().map(|c| c.family.as_str()).collect();
         assert_eq!(order, ["c", "b", "a", "weak"]);
+    }
+
+    #[test]
+    fn the_onset_is_a_steps_epoch_or_a_sources_start() {
+        let c = |params, effect| Candidate::from_scores("x", 0.1, vec![0.0], 0.95, params, effect);
+        let step = OwnedEffect::Step {
+            station: 3,
+            epoch_day: 17_000.0,
+            offset_mm: [0.0, 0.0, 9.0],
+        };
+        let dated = json!({"start": "2019-01-01"});
+        assert_eq!(c(json!({}), Some(step.clone())).onset_day(), Some(17_000.0));
+        assert_eq!(c(dated.clone(), Some(step)).onset_day(), Some(17_000.0));
+        let source = OwnedEffect::SecondSource {
+            x_km: 1.0,
+            y_km: 2.0,
+            depth_km: 3.0,
+        };
+        let day = crate::data::day_number("2019-01-01");
+        assert_eq!(c(dated, Some(source.clone())).onset_day(), Some(day));
+        assert_eq!(c(json!({}), Some(source)).onset_day(), None);
+        assert_eq!(c(json!({"start": "someday"}), None).onset_day(), None);
     }
 }
