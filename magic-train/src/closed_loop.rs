@@ -366,7 +366,8 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         };
         eprint!("{}", analysis.table());
         let previous_valid = rounds.last().map(|r: &Round| r.b.mse[1]);
-        // The last round kept was judged on the blocks: B on them with its effects is known.
+        // When the last round (kept, or the loop would have stopped) was judged on the blocks,
+        // B on them with its effects is known.
         let previous_blocks = rounds
             .last()
             .and_then(|r| r.interleaved.as_ref())
