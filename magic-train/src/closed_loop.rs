@@ -11,7 +11,7 @@
 //! source's change in the validation years) is one retraining on those years cannot learn: a
 //! step's term is zero on every training row, a source's volume never moves there. It is judged
 //! by B without and with it trained on interleaved blocks of the training and validation rows
-//! ([`interleaved`]). The loop ends with a [`StopReason`] the report prints. Effects
+//! ([`interleaved`]), scored on the held-out blocks' days from its onset on. The loop ends with a [`StopReason`] the report prints. Effects
 //! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
 //! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
 //! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
@@ -94,8 +94,11 @@ pub const KEEP_BLOCK_ROWS: usize = 60;
 pub struct Interleaved {
     /// Rows per block.
     pub block: usize,
-    /// B's validation MSE on the blocks held out, without and with the effect.
+    /// B's validation MSE without and with the effect, on the held-out blocks' days from the
+    /// effect's onset on (before it the two differ only by training).
     pub valid: [f64; 2],
+    /// How many held-out days that is.
+    pub days: usize,
 }
 
 /// Why the loop stopped.
@@ -309,7 +312,8 @@ fn judge_interleaved<P: Problem + ?Sized>(
     let Some(data) = interleaved(problem.data(), KEEP_BLOCK_ROWS) else {
         return Ok(None);
     };
-    if last_day(&data.train) < onset {
+    let scored = data.valid.since(onset);
+    if last_day(&data.train) < onset || scored.is_empty() {
         return Ok(None);
     }
     eprintln!(
@@ -325,10 +329,11 @@ fn judge_interleaved<P: Problem + ?Sized>(
             &opts.train,
             opts.seed,
         )?;
-        Ok(evaluate(&Model::decode(&m.encode()?)?, &data.valid, "valid")?.mse)
+        Ok(evaluate(&Model::decode(&m.encode()?)?, &scored, "valid")?.mse)
     };
     Ok(Some(Interleaved {
         block: KEEP_BLOCK_ROWS,
+        days: scored.len(),
         valid: [without.map_or_else(|| valid(before), Ok)?, valid(effects)?],
     }))
 }

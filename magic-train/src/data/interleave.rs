@@ -27,6 +27,16 @@ impl Split {
         }
         self.x.extend(other.x.iter().cloned());
     }
+
+    /// The rows dated on or after `day` (days since 1970-01-01), in order; none without dates.
+    pub fn since(&self, day: f64) -> Split {
+        let mut out = Split::default();
+        let days = self.days();
+        for (i, _) in days.iter().enumerate().filter(|(_, d)| **d >= day) {
+            out.append(&self.rows(i, i + 1));
+        }
+        out
+    }
 }
 
 /// The training rows followed by the validation rows, cut into blocks of `block` rows, with the
@@ -136,6 +146,19 @@ mod tests {
         let last_train = d.train.days().into_iter().fold(f64::MIN, f64::max);
         assert!(i.train.days().iter().any(|&t| t > last_train));
         assert!(i.valid.days().iter().any(|&t| t <= last_train));
+    }
+
+    #[test]
+    fn rows_since_a_day_keep_their_dates() {
+        let d = data(20, 10);
+        let onset = d.valid.days()[4];
+        let s = d.valid.since(onset);
+        assert_eq!(s.len(), 6);
+        assert_eq!(s.dates, d.valid.dates[4..]);
+        assert!(d.valid.since(f64::INFINITY).is_empty());
+        let mut undated = d.valid.clone();
+        undated.dates.clear();
+        assert!(undated.since(0.0).is_empty(), "no dates, no rows");
     }
 
     #[test]
