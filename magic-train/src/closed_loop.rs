@@ -294,13 +294,12 @@ fn last_day(s: &Split) -> f64 {
 
 /// The keep rule's figures for the last of `effects`, found to start on day `onset`
 /// ([`Candidate::onset_day`]), when that is after the training years and the interleaved blocks
-/// put rows after it into training; `None` otherwise. `without`: B's validation MSE on the
-/// blocks without it, when known (training is repeatable).
+/// put rows after it into training; `None` otherwise. B without it is trained again each time:
+/// the days scored depend on the onset.
 fn judge_interleaved<P: Problem + ?Sized>(
     problem: &P,
     effects: &[OwnedEffect],
     onset: Option<f64>,
-    without: Option<f64>,
     opts: &LoopOptions,
 ) -> Result<Option<Interleaved>> {
     let (Some((added, before)), Some(onset)) = (effects.split_last(), onset) else {
@@ -334,7 +333,7 @@ fn judge_interleaved<P: Problem + ?Sized>(
     Ok(Some(Interleaved {
         block: KEEP_BLOCK_ROWS,
         days: scored.len(),
-        valid: [without.map_or_else(|| valid(before), Ok)?, valid(effects)?],
+        valid: [valid(before)?, valid(effects)?],
     }))
 }
 
@@ -371,12 +370,6 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         };
         eprint!("{}", analysis.table());
         let previous_valid = rounds.last().map(|r: &Round| r.b.mse[1]);
-        // When the last round (kept, or the loop would have stopped) was judged on the blocks,
-        // B on them with its effects is known.
-        let previous_blocks = rounds
-            .last()
-            .and_then(|r| r.interleaved.as_ref())
-            .map(|j| j.valid[1]);
         rounds.push(Round {
             round,
             effects: effects.iter().map(|e| e.family().to_string()).collect(),
@@ -392,7 +385,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         let last = rounds.len() - 1;
         if let Some(before) = previous_valid {
             let onset = rounds[last].added.as_ref().and_then(Candidate::onset_day);
-            let judged = judge_interleaved(problem, &effects, onset, previous_blocks, opts)?;
+            let judged = judge_interleaved(problem, &effects, onset, opts)?;
             let valid = judged
                 .as_ref()
                 .map_or([before, rounds[last].b.mse[1]], |j| j.valid);
@@ -502,21 +495,17 @@ mod tests {
         };
         let judge = |effects: &[OwnedEffect]| {
             let onset = effects.last().and_then(OwnedEffect::onset_day);
-            judge_interleaved(&s.problem, effects, onset, None, &opts).unwrap()
+            judge_interleaved(&s.problem, effects, onset, &opts).unwrap()
         };
         let after = last_day(&data.train) + 30.0;
         let j = judge(&[OwnedEffect::CommonMode, step(after)]).expect("judged on blocks");
         assert_eq!(j.block, KEEP_BLOCK_ROWS);
         assert!(j.valid.iter().all(|v| v.is_finite() && *v > 0.0), "{j:?}");
-        // Training is repeatable, so a known B without the effect stands in for a retraining.
-        let again = judge_interleaved(
-            &s.problem,
-            &[OwnedEffect::CommonMode, step(after)],
-            Some(after),
-            Some(j.valid[0]),
-            &opts,
-        );
-        assert_eq!(again.unwrap().unwrap().valid, j.valid);
+        // Scored on the held-out days from the onset on only.
+        let held_out = data.valid.len() as f64 / (data.train.len() + data.valid.len()) as f64;
+        let after_onset = last_day(&data.valid) - after + 1.0;
+        assert!(j.days > 0 && (j.days as f64) < after_onset, "{j:?}");
+        assert!((j.days as f64 - after_onset * held_out).abs() < 2.0 * KEEP_BLOCK_ROWS as f64);
         // Within the training years, without an onset, or after every row: the plain rule.
         assert!(judge(&[step(last_day(&data.train) - 30.0)]).is_none());
         assert!(judge(&[OwnedEffect::CommonMode]).is_none());
@@ -526,11 +515,9 @@ mod tests {
             y_km: -1.0,
             depth_km: 4.0,
         };
-        assert!(
-            judge_interleaved(&s.problem, &[source], Some(after), None, &opts)
-                .unwrap()
-                .is_some()
-        );
+        assert!(judge_interleaved(&s.problem, &[source], Some(after), &opts)
+            .unwrap()
+            .is_some());
         assert!(judge(&[step(last_day(&data.valid) + 1.0)]).is_none());
     }
 
