@@ -10,15 +10,16 @@
 //! out again and the loop stops. An effect that starts after the training years (a step or a
 //! source's change in the validation years) is one retraining on those years cannot learn: a
 //! step's term is zero on every training row, a source's volume never moves there. It is judged
-//! by B without and with it trained on interleaved blocks of the training and validation rows
-//! ([`interleaved`]), scored on the held-out blocks' days from its onset on. The loop ends with a [`StopReason`] the report prints. Effects
+//! by B without and with it trained on interleaved blocks of the training and validation rows,
+//! in two folds that hold out every day from its onset on once ([`onset_folds`]), and scored on
+//! those days. The loop ends with a [`StopReason`] the report prints. Effects
 //! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
 //! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
 //! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
 //! where the problem has one, a classical baseline with the same declared effects.
 
 use crate::analysis::{analyse, AnalysisOptions, Candidate};
-use crate::data::{interleaved, Split};
+use crate::data::{onset_folds, Split};
 use crate::eval::{evaluate, evaluate_splits};
 use crate::model::OwnedEffect;
 use crate::problem::{Metric, Problem};
@@ -89,15 +90,16 @@ pub struct Round {
 pub const KEEP_BLOCK_ROWS: usize = 60;
 
 /// The keep rule for an effect that starts after the training years: B's validation MSE without
-/// and with it, both trained on the same interleaved blocks ([`interleaved`]).
+/// and with it, both trained on the same interleaved blocks ([`onset_folds`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct Interleaved {
     /// Rows per block.
     pub block: usize,
     /// B's validation MSE without and with the effect, on the held-out blocks' days from the
-    /// effect's onset on (before it the two differ only by training).
+    /// effect's onset on (before it the two differ only by training), over both folds.
     pub valid: [f64; 2],
-    /// How many held-out days that is.
+    /// How many held-out days that is (every day from the onset on in the training and
+    /// validation years).
     pub days: usize,
 }
 
@@ -293,9 +295,10 @@ fn last_day(s: &Split) -> f64 {
 }
 
 /// The keep rule's figures for the last of `effects`, found to start on day `onset`
-/// ([`Candidate::onset_day`]), when that is after the training years and the interleaved blocks
-/// put rows after it into training; `None` otherwise. B without it is trained again each time:
-/// the days scored depend on the onset.
+/// ([`Candidate::onset_day`]), when that is after the training years and there are two blocks
+/// from it on; `None` otherwise. B without and with it is trained on each of the two folds
+/// ([`onset_folds`]) and scored on the fold's held-out days from the onset on (before it the two
+/// differ only by training); the figures are the means over those days of both folds.
 fn judge_interleaved<P: Problem + ?Sized>(
     problem: &P,
     effects: &[OwnedEffect],
@@ -308,32 +311,29 @@ fn judge_interleaved<P: Problem + ?Sized>(
     if last_day(&problem.data().train) >= onset {
         return Ok(None);
     }
-    let Some(data) = interleaved(problem.data(), KEEP_BLOCK_ROWS) else {
+    let Some(folds) = onset_folds(problem.data(), KEEP_BLOCK_ROWS, onset) else {
         return Ok(None);
     };
-    let scored = data.valid.since(onset);
-    if last_day(&data.train) < onset || scored.is_empty() {
-        return Ok(None);
-    }
     eprintln!(
-        "{} starts after the training years: B without and with it on interleaved blocks of {KEEP_BLOCK_ROWS} rows",
+        "{} starts after the training years: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
         added.family()
     );
-    let valid = |effects: &[OwnedEffect]| -> Result<f64> {
-        let (m, _) = train_model_on(
-            problem,
-            &data,
-            ModelKind::B,
-            effects,
-            &opts.train,
-            opts.seed,
-        )?;
-        Ok(evaluate(&Model::decode(&m.encode()?)?, &scored, "valid")?.mse)
-    };
+    let (mut sums, mut days) = ([0.0; 2], 0);
+    for data in &folds {
+        let scored = data.valid.since(onset);
+        for (sum, effects) in sums.iter_mut().zip([before, effects]) {
+            let (m, _) =
+                train_model_on(problem, data, ModelKind::B, effects, &opts.train, opts.seed)?;
+            let mse = evaluate(&Model::decode(&m.encode()?)?, &scored, "valid")?.mse;
+            *sum += mse * scored.len() as f64;
+        }
+        days += scored.len();
+    }
+    let n = days.max(1) as f64;
     Ok(Some(Interleaved {
         block: KEEP_BLOCK_ROWS,
-        days: scored.len(),
-        valid: [valid(before)?, valid(effects)?],
+        days,
+        valid: [sums[0] / n, sums[1] / n],
     }))
 }
 
@@ -501,11 +501,10 @@ mod tests {
         let j = judge(&[OwnedEffect::CommonMode, step(after)]).expect("judged on blocks");
         assert_eq!(j.block, KEEP_BLOCK_ROWS);
         assert!(j.valid.iter().all(|v| v.is_finite() && *v > 0.0), "{j:?}");
-        // Scored on the held-out days from the onset on only.
-        let held_out = data.valid.len() as f64 / (data.train.len() + data.valid.len()) as f64;
-        let after_onset = last_day(&data.valid) - after + 1.0;
-        assert!(j.days > 0 && (j.days as f64) < after_onset, "{j:?}");
-        assert!((j.days as f64 - after_onset * held_out).abs() < 2.0 * KEEP_BLOCK_ROWS as f64);
+        // Scored on every day from the onset on (one row a day), each held out by one fold.
+        let after_onset = data.valid.since(after).len();
+        assert!(after_onset > 2 * KEEP_BLOCK_ROWS);
+        assert_eq!(j.days, after_onset, "{j:?}");
         // Within the training years, without an onset, or after every row: the plain rule.
         assert!(judge(&[step(last_day(&data.train) - 30.0)]).is_none());
         assert!(judge(&[OwnedEffect::CommonMode]).is_none());

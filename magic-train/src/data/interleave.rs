@@ -3,7 +3,8 @@
 //! The loop's keep rule retrains B and asks whether its validation MSE fell. An effect that only
 //! starts after the training years (a step in the validation years) is zero on every training row:
 //! the encoder never learns that F carries it, so the comparison cannot judge it. Dealing the
-//! training and validation rows out again in blocks puts rows after its onset on both sides.
+//! training and validation rows out again in blocks puts rows after its onset on both sides; two
+//! folds hold out every row after it once, so the judgement rests on all of them.
 
 use super::{Dataset, Split};
 
@@ -39,62 +40,91 @@ impl Split {
     }
 }
 
-/// The training rows followed by the validation rows, cut into blocks of `block` rows, with the
-/// validation share of the blocks (as in `data`, at least one block) spread evenly among them;
-/// the test split and the standardisation are kept. `None` when there are fewer than two blocks.
+/// The training rows followed by the validation rows, cut into blocks of `block` rows and dealt
+/// out twice, for judging an effect that begins on day `onset` (days since 1970-01-01): the
+/// blocks from the one holding the onset on are held out in turn, the even ones in the first
+/// dataset and the odd ones in the second, so that every row from the onset on is held out once
+/// and each dataset trains on the other half; before the onset, the validation share of the
+/// blocks (as in `data`) is held out, spread evenly. The test split and the standardisation are
+/// kept. `None` without dates on every row or with fewer than two blocks from the onset on.
 ///
 /// ```
-/// use magic_train::data::{interleaved, Dataset, Split};
-/// let split = |n: usize, from: f32| Split {
-///     x: (0..n).map(|i| vec![from + i as f32]).collect(),
+/// use magic_train::data::{onset_folds, Dataset, Split};
+/// let days = |from: i64, n: i64| Split {
+///     x: (from..from + n).map(|d| vec![d as f32]).collect(),
+///     dates: (from..from + n)
+///         .map(|d| {
+///             let (y, m, dd) = magic_core::time::civil_from_days(d);
+///             format!("{y:04}-{m:02}-{dd:02}")
+///         })
+///         .collect(),
 ///     ..Split::default()
 /// };
 /// let data = Dataset {
-///     columns: vec!["u".into()],
+///     columns: vec!["day".into()],
 ///     mean: vec![0.0],
 ///     scale: vec![1.0],
-///     train: split(8, 0.0),
-///     valid: split(2, 8.0),
+///     train: days(0, 8),
+///     valid: days(8, 4),
 ///     test: Split::default(),
-///     source: "ten rows".into(),
+///     source: "twelve days".into(),
 /// };
-/// let d = interleaved(&data, 2).unwrap();
-/// // five blocks of two rows, one in five for validation: the last of them
-/// assert_eq!(d.valid.x, vec![vec![8.0], vec![9.0]]);
-/// let d = interleaved(&data, 1).unwrap();
-/// // ten blocks of one row: every fifth
-/// assert_eq!(d.valid.x, vec![vec![4.0], vec![9.0]]);
-/// assert_eq!(d.train.len(), 8);
+/// // blocks of two days; the onset (day 7) in the fourth block: three blocks from it on
+/// let [a, b] = onset_folds(&data, 2, 7.0).unwrap();
+/// let held = |d: &Dataset| d.valid.x.iter().map(|r| r[0] as i64).collect::<Vec<_>>();
+/// // before it, one block in three (as in `data`): the third
+/// assert_eq!(held(&a), vec![4, 5, 6, 7, 10, 11]);
+/// assert_eq!(held(&b), vec![4, 5, 8, 9]);
+/// assert_eq!(a.train.len() + a.valid.len(), 12);
 /// ```
-pub fn interleaved(data: &Dataset, block: usize) -> Option<Dataset> {
+pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset; 2]> {
     let mut all = data.train.clone();
     all.append(&data.valid);
     let block = block.max(1);
-    let blocks = all.len().div_ceil(block);
-    let total = data.train.len() + data.valid.len();
-    if blocks < 2 || total == 0 {
+    let total = all.len();
+    let days = all.days();
+    if days.len() != total || days.iter().any(|d| !d.is_finite()) {
+        return None;
+    }
+    let blocks = total.div_ceil(block);
+    let starts_after = |k: usize| {
+        days[k * block..((k + 1) * block).min(total)]
+            .iter()
+            .any(|&d| d >= onset)
+    };
+    let first = (0..blocks).find(|&k| starts_after(k))?;
+    if blocks - first < 2 {
         return None;
     }
     let share = data.valid.len() as f64 / total as f64;
-    let to_valid = ((blocks as f64 * share).round() as usize).clamp(1, blocks - 1);
-    let (mut train, mut valid) = (Split::default(), Split::default());
-    for k in 0..blocks {
-        let rows = all.rows(k * block, (k + 1) * block);
-        if (k + 1) * to_valid / blocks > k * to_valid / blocks {
-            valid.append(&rows);
-        } else {
-            train.append(&rows);
+    let before = ((first as f64 * share).round() as usize).min(first.saturating_sub(1));
+    let fold = |f: usize| {
+        let (mut train, mut valid) = (Split::default(), Split::default());
+        for k in 0..blocks {
+            let held = if k < first {
+                (k + 1) * before / first > k * before / first
+            } else {
+                (k - first) % 2 == f
+            };
+            let rows = all.rows(k * block, (k + 1) * block);
+            if held {
+                valid.append(&rows);
+            } else {
+                train.append(&rows);
+            }
         }
-    }
-    Some(Dataset {
-        train,
-        valid,
-        source: format!(
-            "{} (training and validation rows in blocks of {block})",
-            data.source
-        ),
-        ..data.clone()
-    })
+        Dataset {
+            train,
+            valid,
+            source: format!(
+                "{} (training and validation rows in blocks of {block}, fold {} of 2 from the onset on)",
+                data.source,
+                f + 1
+            ),
+            ..data.clone()
+        }
+    };
+    Some([fold(0), fold(1)])
 }
 
 #[cfg(test)]
@@ -128,24 +158,29 @@ mod tests {
     }
 
     #[test]
-    fn every_row_lands_once_and_the_share_is_kept() {
+    fn every_row_from_the_onset_on_is_held_out_once() {
         let d = data(1900, 500);
-        let i = interleaved(&d, 60).unwrap();
-        assert_eq!(i.train.len() + i.valid.len(), 2400);
-        assert_eq!(i.valid.len(), 480, "8 of 40 blocks");
-        assert_eq!(i.train.dates.len(), i.train.len(), "dates stay aligned");
-        assert_eq!(i.test.len(), 3);
-        let first_valid = &i.valid.dates[0];
-        assert_eq!(first_valid, &d.train.dates[240], "the fifth block");
-    }
-
-    #[test]
-    fn rows_after_the_training_years_reach_training() {
-        let d = data(1900, 500);
-        let i = interleaved(&d, 60).unwrap();
-        let last_train = d.train.days().into_iter().fold(f64::MIN, f64::max);
-        assert!(i.train.days().iter().any(|&t| t > last_train));
-        assert!(i.valid.days().iter().any(|&t| t <= last_train));
+        let onset = d.valid.days()[100];
+        let folds = onset_folds(&d, 60, onset).unwrap();
+        let mut held_after = 0;
+        for f in &folds {
+            assert_eq!(f.train.len() + f.valid.len(), 2400);
+            assert_eq!(f.train.dates.len(), f.train.len(), "dates stay aligned");
+            assert_eq!(f.test.len(), 3);
+            assert!(
+                f.train.days().iter().any(|&t| t >= onset),
+                "rows after it train"
+            );
+            held_after += f.valid.since(onset).len();
+        }
+        assert_eq!(held_after, 400);
+        // Before the onset's block (block 33 of 40) the validation share: 7 of 33 blocks.
+        let before = folds[0].valid.len() - folds[0].valid.since(d.valid.days()[80]).len();
+        assert_eq!(before, 7 * 60);
+        assert_eq!(
+            folds[0].valid.dates[0], d.train.dates[240],
+            "the fifth block"
+        );
     }
 
     #[test]
@@ -162,18 +197,29 @@ mod tests {
     }
 
     #[test]
-    fn too_few_rows_for_two_blocks() {
-        assert!(interleaved(&data(30, 20), 60).is_none());
-        let i = interleaved(&data(30, 20), 10).unwrap();
-        assert_eq!(i.valid.len(), 20, "two of five blocks");
+    fn too_few_blocks_from_the_onset_on() {
+        let d = data(30, 20);
+        assert!(
+            onset_folds(&d, 60, d.train.days()[0]).is_none(),
+            "one block"
+        );
+        let last = d.valid.days()[19];
+        assert!(
+            onset_folds(&d, 10, last).is_none(),
+            "the onset in the last block"
+        );
+        let [a, b] = onset_folds(&d, 10, last - 10.0).unwrap();
+        assert_eq!(
+            (a.valid.len(), b.valid.len()),
+            (20, 20),
+            "a block before it and one after"
+        );
     }
 
     #[test]
-    fn missing_dates_are_dropped_not_misaligned() {
+    fn rows_without_a_date_give_no_folds() {
         let mut d = data(20, 10);
         d.valid.dates.clear();
-        let i = interleaved(&d, 5).unwrap();
-        assert!(i.train.dates.is_empty() && i.valid.dates.is_empty());
-        assert_eq!(i.train.len() + i.valid.len(), 30);
+        assert!(onset_folds(&d, 5, 0.0).is_none());
     }
 }

@@ -120,7 +120,7 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
         if let Some(j) = &r.interleaved {
             let _ = writeln!(
                 md,
-                "\nRound {}'s effect starts after the training years, so retraining on them cannot learn it: the keep rule compared B without and with it, both trained on blocks of {} rows of the training and validation years dealt out again (validation MSE on the {} held-out days from its onset on: {:.4} → {:.4}).",
+                "\nRound {}'s effect starts after the training years, so retraining on them cannot learn it: the keep rule compared B without and with it, both trained on blocks of {} rows of the training and validation years dealt out again in two folds that hold out each of the {} days from its onset on once (validation MSE on them: {:.4} → {:.4}).",
                 r.round, j.block, j.days, j.valid[0], j.valid[1]
             );
         }
