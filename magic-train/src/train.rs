@@ -495,7 +495,7 @@ pub fn train_model<P: Problem + ?Sized>(
 }
 
 /// [`train_model`] on other splits of the problem's observations (the loop's keep rule for an
-/// effect that starts after the training years: [`crate::data::interleaved`]).
+/// effect that starts after the training years: [`crate::data::onset_folds`]).
 pub fn train_model_on<P: Problem + ?Sized>(
     problem: &P,
     data: &Dataset,
