@@ -92,28 +92,52 @@ impl Split {
     pub fn rows(&self, lo: usize, hi: usize) -> Split {
         let hi = hi.min(self.len());
         let lo = lo.min(hi);
-        let part = |v: &[String]| {
-            if v.is_empty() {
-                vec![]
-            } else {
-                v[lo..hi].to_vec()
-            }
-        };
         Split {
             x: self.x[lo..hi].to_vec(),
-            dates: part(&self.dates),
-            labels: part(&self.labels),
-            ids: if self.ids.is_empty() {
-                vec![]
-            } else {
-                self.ids[lo..hi].to_vec()
-            },
+            dates: part(&self.dates, lo, hi),
+            labels: part(&self.labels, lo, hi),
+            ids: part(&self.ids, lo, hi),
         }
+    }
+
+    /// Appends `other`'s rows (dates, labels and ids kept only where both splits have them).
+    pub(crate) fn append(&mut self, other: &Split) {
+        let (n, m) = (self.len(), other.len());
+        extend_aligned(&mut self.dates, n, &other.dates, m);
+        extend_aligned(&mut self.labels, n, &other.labels, m);
+        extend_aligned(&mut self.ids, n, &other.ids, m);
+        self.x.extend(other.x.iter().cloned());
+    }
+
+    /// The rows dated on or after `day` (days since 1970-01-01), in order; none without dates.
+    pub fn since(&self, day: f64) -> Split {
+        let mut out = Split::default();
+        for (i, d) in self.days().into_iter().enumerate() {
+            if d >= day {
+                out.append(&self.rows(i, i + 1));
+            }
+        }
+        out
     }
 
     /// The first `n` rows (all if fewer).
     pub fn head(&self, n: usize) -> Split {
         self.rows(0, n)
+    }
+}
+
+/// A per-row column's rows `lo..hi`, or none when the split does not carry it.
+fn part<T: Clone>(v: &[T], lo: usize, hi: usize) -> Vec<T> {
+    v.get(lo..hi).map_or_else(Vec::new, <[T]>::to_vec)
+}
+
+/// Extends per-row column `a` (of a split with `n` rows) by `b` (of one with `m`) when both are
+/// complete; otherwise clears it, so a column is kept whole or not at all.
+fn extend_aligned<T: Clone>(a: &mut Vec<T>, n: usize, b: &[T], m: usize) {
+    if a.len() == n && b.len() == m {
+        a.extend_from_slice(b);
+    } else {
+        a.clear();
     }
 }
 

@@ -8,38 +8,6 @@
 
 use super::{Dataset, Split};
 
-impl Split {
-    /// Appends `other`'s rows (dates, labels and ids kept only where both splits have them).
-    fn append(&mut self, other: &Split) {
-        let both = |a: &mut Vec<String>, b: &[String], n: usize| {
-            if a.len() == n && b.len() == other.len() {
-                a.extend_from_slice(b);
-            } else {
-                a.clear();
-            }
-        };
-        let n = self.len();
-        both(&mut self.dates, &other.dates, n);
-        both(&mut self.labels, &other.labels, n);
-        if self.ids.len() == n && other.ids.len() == other.len() {
-            self.ids.extend_from_slice(&other.ids);
-        } else {
-            self.ids.clear();
-        }
-        self.x.extend(other.x.iter().cloned());
-    }
-
-    /// The rows dated on or after `day` (days since 1970-01-01), in order; none without dates.
-    pub fn since(&self, day: f64) -> Split {
-        let mut out = Split::default();
-        let days = self.days();
-        for (i, _) in days.iter().enumerate().filter(|(_, d)| **d >= day) {
-            out.append(&self.rows(i, i + 1));
-        }
-        out
-    }
-}
-
 /// The training rows followed by the validation rows, cut into blocks of `block` rows and dealt
 /// out twice, for judging an effect that begins on day `onset` (days since 1970-01-01): the
 /// blocks from the one holding the onset on are held out in turn, the even ones in the first
