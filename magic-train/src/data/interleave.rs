@@ -55,12 +55,8 @@ pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset;
         return None;
     }
     let blocks = total.div_ceil(block);
-    let starts_after = |k: usize| {
-        days[k * block..((k + 1) * block).min(total)]
-            .iter()
-            .any(|&d| d >= onset)
-    };
-    let first = (0..blocks).find(|&k| starts_after(k))?;
+    // The onset's block: the one holding the first row on or after it.
+    let first = days.iter().position(|&d| d >= onset)? / block;
     if blocks - first < 2 {
         return None;
     }
