@@ -111,13 +111,21 @@ impl Split {
 
     /// The rows dated on or after `day` (days since 1970-01-01), in order; none without dates.
     pub fn since(&self, day: f64) -> Split {
-        let mut out = Split::default();
-        for (i, d) in self.days().into_iter().enumerate() {
-            if d >= day {
-                out.append(&self.rows(i, i + 1));
-            }
+        let days = self.days();
+        let keep: Vec<usize> = (0..self.len())
+            .filter(|&i| days.get(i).is_some_and(|&d| d >= day))
+            .collect();
+        self.pick(&keep)
+    }
+
+    /// The rows at `keep` (indices into the split, in the order given).
+    fn pick(&self, keep: &[usize]) -> Split {
+        Split {
+            x: keep.iter().map(|&i| self.x[i].clone()).collect(),
+            dates: pick_column(&self.dates, self.len(), keep),
+            labels: pick_column(&self.labels, self.len(), keep),
+            ids: pick_column(&self.ids, self.len(), keep),
         }
-        out
     }
 
     /// The first `n` rows (all if fewer).
@@ -129,6 +137,15 @@ impl Split {
 /// A per-row column's rows `lo..hi`, or none when the split does not carry it.
 fn part<T: Clone>(v: &[T], lo: usize, hi: usize) -> Vec<T> {
     v.get(lo..hi).map_or_else(Vec::new, <[T]>::to_vec)
+}
+
+/// A per-row column's rows at `keep`, or none when the column is not whole (`n` rows).
+fn pick_column<T: Clone>(v: &[T], n: usize, keep: &[usize]) -> Vec<T> {
+    if v.len() == n {
+        keep.iter().map(|&i| v[i].clone()).collect()
+    } else {
+        Vec::new()
+    }
 }
 
 /// Extends per-row column `a` (of a split with `n` rows) by `b` (of one with `m`) when both are
@@ -258,5 +275,33 @@ mod tests {
         assert_eq!(p.ids, vec![8, 9]);
         assert_eq!(p.days()[0], day_number("2018-04-02"));
         assert!(s.head(0).is_empty());
+    }
+
+    #[test]
+    fn rows_since_a_day_keep_labels_and_ids_and_skip_bad_dates() {
+        let s = Split {
+            x: vec![vec![1.0], vec![2.0], vec![3.0], vec![4.0]],
+            dates: vec![
+                "2018.04.03".into(),
+                "2018.04.01".into(),
+                "not a date".into(),
+                "2018.04.02".into(),
+            ],
+            labels: vec!["a".into(), "b".into(), "c".into(), "d".into()],
+            ids: vec![7, 8, 9, 10],
+        };
+        let p = s.since(day_number("2018-04-02"));
+        assert_eq!(p.x, vec![vec![1.0], vec![4.0]], "in the split's order");
+        assert_eq!(p.labels, vec!["a", "d"]);
+        assert_eq!(p.ids, vec![7, 10]);
+        let unlabelled = Split {
+            labels: vec!["a".into()],
+            ..s.clone()
+        };
+        assert!(
+            unlabelled.since(0.0).labels.is_empty(),
+            "a column kept whole or not at all"
+        );
+        assert_eq!(unlabelled.since(0.0).ids.len(), 3);
     }
 }
