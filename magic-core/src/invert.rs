@@ -2,9 +2,10 @@
 //!
 //! One path for every target: standardise the observations, run the encoder E, map its sigmoid
 //! outputs into the variables' bounds, run the forward model F (generic over [`Real`]: `f32` on the
-//! board, `f64` on the host), standardise F's output, run the correction C, and compare with the
-//! observations. Missing channels (NaN) are allowed: they first enter the encoder as the training
-//! mean (standardised 0), then [`IMPUTE_PASSES`] more passes refill them with the model's own
+//! board, `f64` on the host), standardise F's output, run the correction C (on F without its dated
+//! terms, which are added after it: [`model_correction`]), and compare with the observations.
+//! Missing channels (NaN) are allowed: they first enter the encoder as the training mean
+//! (standardised 0), then [`IMPUTE_PASSES`] more passes refill them with the model's own
 //! reconstruction; they are left out of the residual and reported in the flags and the station
 //! mask.
 
@@ -55,7 +56,8 @@ pub struct Inversion<R> {
     pub n_obs: usize,
     /// F(Z) in physical units (zeros for variant A).
     pub physics: [R; MAX_OBS],
-    /// The final reconstruction in physical units (C(F(Z)) for C, F(Z) for B, decoder for A).
+    /// The final reconstruction in physical units (for C, C(F₀(Z)) + D(t): F₀ is F without its
+    /// dated terms D(t), see [`model_correction`]; F(Z) for B; the decoder's output for A).
     pub recon: [R; MAX_OBS],
     /// RMS of observation − reconstruction over observed channels, physical units.
     pub residual_rms: f64,
@@ -381,7 +383,7 @@ fn pass<R: Real, P: Problems, Q: Probe>(
             probe.begin(Part::Correction);
             let y = run_scratch(&model.decoder, n_params, &mut ws.nn)?;
             probe.end(Part::Correction);
-            destandardise(model, y, &mut out.recon[..n_obs])?;
+            destandardise(model, y, &mut out.recon[..n_obs], false)?;
         }
         Variant::B | Variant::C => {
             probe.begin(Part::Forward);
@@ -393,16 +395,10 @@ fn pass<R: Real, P: Problems, Q: Probe>(
             )?;
             probe.end(Part::Forward);
             if model.variant == Variant::C {
-                let input = ws.nn.input();
-                let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
-                for (f, p) in input.iter_mut().zip(&out.physics[..n_obs]) {
-                    let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
-                    *f = (R::value(*p) as f32 - mean) / scale;
-                }
                 probe.begin(Part::Correction);
-                let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
+                let (physics, recon) = (&out.physics[..n_obs], &mut out.recon[..n_obs]);
+                model_correction(model, physics, t_day, recon, ws)?;
                 probe.end(Part::Correction);
-                destandardise(model, y, &mut out.recon[..n_obs])?;
             } else {
                 out.recon[..n_obs].copy_from_slice(&out.physics[..n_obs]);
             }
@@ -429,6 +425,47 @@ pub fn model_decoder(
     ws: &mut Workspace,
 ) -> Result<(), Error> {
     run(&model.decoder, z, out, &mut ws.nn)
+}
+
+/// The correction C of a variant-C model: F's values `physics` (physical units) of an observation
+/// on day `t_day` → the reconstruction `recon`. C sees F without its dated terms
+/// ([`Effect::is_dated`](crate::effects::Effect::is_dated): annual terms, steps, drifts),
+/// standardised, and those terms are added to its output: C, fitted over the training years,
+/// corrects the physics of the source and its latent effects, and a term that grows with the
+/// date cannot take C's input where it was never fitted.
+pub fn model_correction<R: Real>(
+    model: &Model<'_>,
+    physics: &[R],
+    t_day: f64,
+    recon: &mut [R],
+    ws: &mut Workspace,
+) -> Result<(), Error> {
+    // (`recon` shorter than `physics` is an error below, from the network's output size.)
+    let n_obs = physics.len();
+    // The dated terms first, into `recon`, which C's output is then added onto.
+    dated_part(model, t_day, recon)?;
+    let input = ws.nn.input();
+    let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
+    for ((f, p), d) in input.iter_mut().zip(physics).zip(recon.iter()) {
+        let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
+        *f = (R::value(*p - *d) as f32 - mean) / scale;
+    }
+    let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
+    destandardise(model, y, recon, true)
+}
+
+/// The terms of the model's F that depend on the date alone on day `t_day` (physical units),
+/// written over `out`: zero for a model without them (and for the forest-spectra problem).
+pub fn dated_part<R: Real>(model: &Model<'_>, t_day: f64, out: &mut [R]) -> Result<(), Error> {
+    match &model.problem {
+        Problem::Mogi { stations, .. } => {
+            crate::effects::dated_part_of(stations, &model.effects, t_day, out)
+        }
+        Problem::Rtm { .. } => {
+            out.fill(R::zero());
+            Ok(())
+        }
+    }
 }
 
 /// The model's forward model F with its declared effects: physical variables → observations in
@@ -477,8 +514,13 @@ pub fn forward_for<R: Real, P: Problems>(
 }
 
 /// Destandardises network outputs into R (`x = y · scale + mean`, computed in f32 as the
-/// network's outputs are).
-fn destandardise<R: Real>(model: &Model<'_>, y: &[f32], out: &mut [R]) -> Result<(), Error> {
+/// network's outputs are), written over `out` or, if `onto`, added to what it holds.
+fn destandardise<R: Real>(
+    model: &Model<'_>,
+    y: &[f32],
+    out: &mut [R],
+    onto: bool,
+) -> Result<(), Error> {
     if y.len() != out.len() {
         return Err(Error::SizeMismatch {
             what: "network output",
@@ -489,7 +531,8 @@ fn destandardise<R: Real>(model: &Model<'_>, y: &[f32], out: &mut [R]) -> Result
     let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
     for (o, v) in out.iter_mut().zip(y) {
         let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
-        *o = R::c((v * scale + mean) as f64);
+        let x = R::c((v * scale + mean) as f64);
+        *o = if onto { *o + x } else { x };
     }
     Ok(())
 }

@@ -28,7 +28,7 @@
 //! standard deviations by factors measured on synthetic spectra with known variables
 //! ([`Uncertainty::scaled`]).
 
-use crate::invert::{forward_for, model_decoder, Inversion, Workspace};
+use crate::invert::{dated_part, forward_for, model_decoder, Inversion, Workspace};
 use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
 use crate::rtm::inform::crown_from_cover;
 use crate::rtm::N_LEARNED;
@@ -272,7 +272,7 @@ pub fn standard_deviations_for<P: Problems>(
         &mut sw.jac,
     )?;
     if model.variant == Variant::C {
-        correction_jacobian(model, p, sw)?;
+        correction_jacobian(model, p, t_day, sw)?;
     }
 
     // Residual variance over the observed channels (standardised units).
@@ -367,13 +367,22 @@ fn scale(model: &Model<'_>, i: usize) -> Result<f64, Error> {
 
 /// Replaces F's Jacobian in `sw.jac` by that of C(F): for each variable k, the directional
 /// derivative of C (standardised in and out) along F's column k, by central differences.
-fn correction_jacobian(model: &Model<'_>, p: usize, sw: &mut SdWorkspace) -> Result<(), Error> {
+fn correction_jacobian(
+    model: &Model<'_>,
+    p: usize,
+    t_day: f64,
+    sw: &mut SdWorkspace,
+) -> Result<(), Error> {
     let (n, p) = (model.n_obs().min(MAX_OBS), p.min(MAX_PARAMS));
+    let (mut plus, mut minus) = ([0f32; MAX_OBS], [0f32; MAX_OBS]);
+    // C's input: F without its dated terms (`invert::model_correction`), which do not depend on
+    // the variables; `plus` holds those terms until the loop below overwrites it.
+    dated_part::<f32>(model, t_day, &mut plus[..n])?;
     let mut f = [0f32; MAX_OBS];
     for (i, fi) in f.iter_mut().enumerate().take(n) {
-        *fi = ((sw.y[i] - model.obs_mean.get(i) as f64) / scale(model, i)?) as f32;
+        let dated = plus[i] as f64;
+        *fi = ((sw.y[i] - dated - model.obs_mean.get(i) as f64) / scale(model, i)?) as f32;
     }
-    let (mut plus, mut minus) = ([0f32; MAX_OBS], [0f32; MAX_OBS]);
     let (mut up, mut down) = ([0f32; MAX_OBS], [0f32; MAX_OBS]);
     for k in 0..p {
         // The direction: column k in standardised units, normalised.

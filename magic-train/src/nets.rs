@@ -239,7 +239,15 @@ impl Net {
                     .broadcast_sub(&self.mean_t)?
                     .broadcast_div(&self.scale_t)?;
                 let recon = match &self.decoder {
-                    Some(c) => c.forward(&fz)?,
+                    // C corrects F without its dated terms and adds them after (as the core
+                    // does, `magic_core::invert::model_correction`).
+                    Some(c) => match self.dated(phys.as_ref(), days)? {
+                        Some(d) => {
+                            let d = d.to_dtype(fz.dtype())?;
+                            (c.forward(&(&fz - &d)?)? + d)?
+                        }
+                        None => c.forward(&fz)?,
+                    },
                     None => fz.clone(),
                 };
                 Ok(Outputs {
@@ -248,6 +256,26 @@ impl Net {
                 })
             }
         }
+    }
+
+    /// F's dated terms on each of `days` `(batch, 1)`, standardised (divided by the scale, no
+    /// mean): `(batch, n_obs)`, or `None` where they are zero on every day.
+    fn dated(&self, phys: &dyn Physics, days: &Tensor) -> Result<Option<Tensor>> {
+        let days = days.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?;
+        let n = self.scale.len();
+        let mut d = vec![0f32; days.len() * n];
+        let mut row = vec![0f64; n];
+        for (t, out) in days.iter().zip(d.chunks_exact_mut(n.max(1))) {
+            phys.dated(*t, &mut row)
+                .map_err(|e| candle_core::Error::Msg(format!("dated terms of F: {e}")))?;
+            for ((o, v), s) in out.iter_mut().zip(&row).zip(&self.scale) {
+                *o = (v / s) as f32;
+            }
+        }
+        if d.iter().all(|v| *v == 0.0) {
+            return Ok(None);
+        }
+        Tensor::from_vec(d, (days.len(), n), &Device::Cpu).map(Some)
     }
 
     /// All trainable variables.
@@ -304,4 +332,67 @@ pub fn days_tensor(days: &[f64]) -> Result<Tensor> {
 pub fn to_tensor(rows: &[&[f32]], n: usize) -> Result<Tensor> {
     let flat: Vec<f32> = rows.iter().flat_map(|r| r.iter().copied()).collect();
     Tensor::from_vec(flat, (rows.len(), n), &Device::Cpu)?.to_dtype(DType::F32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gnss::synth;
+    use crate::model::{OwnedEffect, OwnedModel};
+    use crate::MogiPhysics;
+    use rand::SeedableRng;
+
+    #[test]
+    fn the_trainers_correction_is_the_cores_beside_dated_terms() {
+        // A random variant-C model whose F holds a drift and a step: the trainer's reconstruction
+        // (C on F without them, then them added) and the exported model's, through magic-core.
+        let s = synth::generate(synth::Scenario::Clean, 4);
+        let (d, network) = (&s.problem.data, &s.problem.network);
+        let rows = d.test.rows(0, 64);
+        let days = rows.days();
+        let effects = vec![
+            OwnedEffect::Drift {
+                t0_day: 14_000.0,
+                rate: (0..36).map(|c| (c % 7) as f32 - 3.0).collect(),
+            },
+            OwnedEffect::Step {
+                station: 2,
+                // Mid-way through the rows: half of them before it, half after.
+                epoch_day: days[32] as f32,
+                offset_mm: [4.0, -3.0, 9.0],
+            },
+        ];
+        let phys: Arc<dyn Physics> =
+            Arc::new(MogiPhysics::new(network.stations.clone(), effects.clone()));
+        let mut rng = StdRng::seed_from_u64(4);
+        let bounds = magic_core::mogi::PAPER_BOUNDS.to_vec();
+        let net = Net::new(Variant::C, d, Some(phys), bounds, 4, &mut rng).unwrap();
+        let model = OwnedModel::from_net(&net, network.spec().unwrap(), effects).unwrap();
+        let bytes = model.encode().unwrap();
+        let core = magic_core::Model::decode(&bytes).unwrap();
+
+        let x: Vec<f32> = rows.x.iter().flatten().copied().collect();
+        let xt = Tensor::from_vec(x, (rows.len(), 36), &Device::Cpu).unwrap();
+        let dt = Tensor::from_vec(days.clone(), (rows.len(), 1), &Device::Cpu).unwrap();
+        let recon = net
+            .forward(&xt, &dt)
+            .unwrap()
+            .recon
+            .to_vec2::<f32>()
+            .unwrap();
+        let mut ws = magic_core::Workspace::default();
+        let mut worst = 0f64;
+        for ((row, t), r) in rows.x.iter().zip(&days).zip(&recon) {
+            let obs: Vec<f32> = (0..36)
+                .map(|c| row[c] * core.obs_scale.get(c) + core.obs_mean.get(c))
+                .collect();
+            let inv = magic_core::invert_at::<f64>(&core, &obs, *t, &mut ws).unwrap();
+            for c in 0..36 {
+                let (m, sc) = (core.obs_mean.get(c) as f64, core.obs_scale.get(c) as f64);
+                worst = worst.max(((inv.recon[c] - m) / sc - r[c] as f64).abs());
+            }
+        }
+        // f32 networks on both sides (candle's kernels and the core's): rounding only.
+        assert!(worst < 1e-4, "trainer and core differ by {worst}");
+    }
 }

@@ -33,6 +33,14 @@ pub trait Physics: Send + Sync {
         out: &mut [f64],
         jac: &mut [f64],
     ) -> Result<(), magic_core::Error>;
+    /// The terms of F that depend on the date alone on day `t` (`out` overwritten; zero by
+    /// default): a variant-C model corrects F without them and adds them after C
+    /// (`magic_core::invert::model_correction`).
+    fn dated(&self, t: f64, out: &mut [f64]) -> Result<(), magic_core::Error> {
+        let _ = t;
+        out.fill(0.0);
+        Ok(())
+    }
     /// Where [`PhysicsOp`] keeps Jacobians its forward pass computed for its backward pass; `None`
     /// (the default): the forward pass computes values only, the backward pass the Jacobian.
     fn jacobian_reuse(&self) -> Option<&JacobianReuse> {

@@ -148,3 +148,59 @@ fn invert_rejects_bad_observations_without_panicking() {
         "station 3 still has its north and up channels"
     );
 }
+
+/// A random variant-C model with a drift of 1 to 36 mm/yr per channel from day 12 000.
+fn c_with_drift() -> magic_train::model::OwnedModel {
+    let mut m = random_mogi_model(Variant::C, 3);
+    m.effects = vec![magic_train::model::OwnedEffect::Drift {
+        t0_day: 12_000.0,
+        rate: (1..=36).map(|r| r as f32).collect(),
+    }];
+    m
+}
+
+#[test]
+fn the_correction_sees_f_without_its_dated_terms() {
+    // The same observation on two days six years apart: E infers the same variables, F differs
+    // by the drift, and C, which sees F without it, gives the same correction — so the
+    // reconstructions differ by exactly the drift's change.
+    let bytes = c_with_drift().encode().unwrap();
+    let m = Model::decode(&bytes).unwrap();
+    let mut ws = Workspace::default();
+    let (t1, t2) = (12_100.0, 12_100.0 + 6.0 * 365.25);
+    let a = magic_core::invert_at::<f64>(&m, &[0.5f32; 36], t1, &mut ws).unwrap();
+    let b = magic_core::invert_at::<f64>(&m, &[0.5f32; 36], t2, &mut ws).unwrap();
+    assert_eq!(a.params, b.params);
+    for c in 0..36 {
+        let drift = (c + 1) as f64 * 6.0;
+        let (df, dr) = (b.physics[c] - a.physics[c], b.recon[c] - a.recon[c]);
+        // (Up to the f64 rounding of adding a few tens of mm to each.)
+        assert!((df - drift).abs() < 1e-9, "channel {c}: F moved {df}");
+        assert!((dr - drift).abs() < 1e-9, "channel {c}: C(F) moved {dr}");
+    }
+}
+
+#[test]
+fn a_version_5_file_is_read_where_it_means_what_it_meant() {
+    let as_v5 = |m: &magic_train::model::OwnedModel| {
+        let mut b = m.encode().unwrap();
+        b[4..6].copy_from_slice(&5u16.to_le_bytes());
+        reseal(&mut b, false);
+        b
+    };
+    // No dated term (or not variant C): the same model.
+    assert!(Model::decode(&as_v5(&random_mogi_model(Variant::C, 3))).is_ok());
+    let mut b_drift = c_with_drift();
+    b_drift.variant = Variant::B;
+    b_drift.decoder.clear();
+    assert!(Model::decode(&as_v5(&b_drift)).is_ok());
+    // C beside a drift: written when C saw the drift too, so refused.
+    assert_eq!(
+        Model::decode(&as_v5(&c_with_drift())).unwrap_err(),
+        Error::UnsupportedVersion {
+            found: 5,
+            supported: VERSION
+        }
+    );
+    assert!(Model::decode(&c_with_drift().encode().unwrap()).is_ok());
+}

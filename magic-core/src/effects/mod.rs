@@ -23,7 +23,7 @@
 pub mod gnss;
 pub mod rtm;
 
-pub use gnss::{mogi_with_effects, mogi_with_effects_of};
+pub use gnss::{dated_part_of, mogi_with_effects, mogi_with_effects_of};
 pub use rtm::{rtm_add_offsets, rtm_fixed_at, ILLUMINATION_NEEDS_PHYSICAL};
 
 use crate::quant::LeF32;
@@ -117,6 +117,18 @@ impl Effect<'_> {
                 | Effect::Step { .. }
                 | Effect::Drift { .. }
                 | Effect::Illumination { .. }
+        )
+    }
+
+    /// Whether the effect is a function of the date alone: no latent variable, the same term for
+    /// every observation of a day (annual and semiannual terms, steps, drifts). A variant-C model
+    /// corrects F without these terms and adds them after C ([`crate::invert::model_correction`]):
+    /// C is fitted over the training years, and a term that grows with time (a drift) would take
+    /// its input where it was never fitted.
+    pub fn is_dated(&self) -> bool {
+        matches!(
+            self,
+            Effect::Seasonal { .. } | Effect::Step { .. } | Effect::Drift { .. }
         )
     }
 

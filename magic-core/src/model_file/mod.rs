@@ -17,7 +17,10 @@
 //! rows ([`crate::quant::blocked_index`]) after 0–3 bytes of padding that align them to four bytes
 //! in the file (the `SMLAD` kernel's layout), and leaves out the per-row arrays an int8 layer's
 //! place in its chain does not use (weight scales of requantised layers, multipliers and shifts
-//! of dequantised ones).
+//! of dequantised ones); 6 feeds a variant-C model's correction F without its dated terms
+//! (annual terms, steps, drifts), which are added after it ([`crate::invert::model_correction`]).
+//! A version-5 file is read where that changes nothing (not variant C, or no dated term) and
+//! refused where it would change its reconstructions.
 
 mod validate;
 
@@ -33,7 +36,10 @@ use serde::{Deserialize, Serialize};
 /// The first four bytes of every model file.
 pub const MAGIC: [u8; 4] = *b"MAGC";
 /// The format version this build reads and writes.
-pub const VERSION: u16 = 5;
+pub const VERSION: u16 = 6;
+
+/// The oldest format version this build reads, where it means what it meant then.
+pub const OLDEST_VERSION: u16 = 5;
 /// Largest station network the compiled core accepts.
 pub const MAX_STATIONS: usize = 32;
 /// Largest number of physical variables (source parameters plus effect parameters).
@@ -330,13 +336,22 @@ impl<'a> Model<'a> {
     /// whole [`Model`]. The format is exactly the derived (postcard) one, which host tests check.
     /// On error `self` holds no valid model.
     pub fn decode_in_place<P: Problems>(&mut self, bytes: &'a [u8]) -> Result<(), Error> {
-        let body = Self::checked_body(bytes)?;
+        let (version, body) = Self::checked_body(bytes)?;
         self.decode_body(body).map_err(|_| Error::Decode)?;
+        let dated_correction =
+            self.variant == Variant::C && self.effects.iter().any(|e| e.is_dated());
+        if version < VERSION && dated_correction {
+            // Written when C saw the dated terms too: this build would reconstruct otherwise.
+            return Err(Error::UnsupportedVersion {
+                found: version,
+                supported: VERSION,
+            });
+        }
         self.validate_for::<P>()
     }
 
     /// The postcard body of a model file after checking its magic, version, length and CRC.
-    fn checked_body(bytes: &'a [u8]) -> Result<&'a [u8], Error> {
+    fn checked_body(bytes: &'a [u8]) -> Result<(u16, &'a [u8]), Error> {
         let n = bytes.len().min(4);
         if bytes.get(..n) != MAGIC.get(..n) {
             return Err(Error::BadMagic);
@@ -348,7 +363,7 @@ impl<'a> Model<'a> {
             return Err(Error::Truncated);
         }
         let version = u16::from_le_bytes([v0, v1]);
-        if version != VERSION {
+        if !(OLDEST_VERSION..=VERSION).contains(&version) {
             return Err(Error::UnsupportedVersion {
                 found: version,
                 supported: VERSION,
@@ -376,7 +391,7 @@ impl<'a> Model<'a> {
         if stored != computed {
             return Err(Error::CrcMismatch { stored, computed });
         }
-        content.get(HEADER..).ok_or(Error::Truncated)
+        Ok((version, content.get(HEADER..).ok_or(Error::Truncated)?))
     }
 
     /// Decodes the fields of the body in the order of the struct (postcard's derived format:

@@ -3,7 +3,7 @@
 
 use crate::model::OwnedEffect;
 use crate::physics::Physics;
-use magic_core::effects::{mogi_with_effects, Effect, MAX_EFFECTS};
+use magic_core::effects::{dated_part_of, mogi_with_effects, Effect, MAX_EFFECTS};
 use magic_core::mogi::{self, Station};
 use magic_core::{Dual, Error};
 
@@ -63,6 +63,9 @@ impl Physics for MogiPhysics {
     }
     fn forward(&self, p: &[f64], t: f64, out: &mut [f64]) -> Result<(), Error> {
         self.with_effects(|eff| mogi_with_effects(&self.stations, eff, p, t, out))
+    }
+    fn dated(&self, t: f64, out: &mut [f64]) -> Result<(), Error> {
+        self.with_effects(|eff| dated_part_of(&self.stations[..], eff, t, out))
     }
     fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), Error> {
         let n = self.n_params();

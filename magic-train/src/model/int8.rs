@@ -56,6 +56,7 @@ impl OwnedModel {
         let model = Model::decode(&bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
         let mut ws = magic_core::Workspace::default();
         let mut out = Vec::with_capacity(x.len());
+        let mut dated = vec![0f64; model.n_obs()];
         for (i, row) in x.iter().enumerate() {
             let obs: Vec<f32> = row
                 .iter()
@@ -70,9 +71,17 @@ impl OwnedModel {
                     .iter()
                     .map(|v| *v as f32)
                     .collect(),
-                _ => (0..inv.n_obs)
-                    .map(|c| ((inv.physics[c] - self.mean[c] as f64) / self.scale[c] as f64) as f32)
-                    .collect(),
+                // C's input: F without its dated terms (`magic_core::invert::model_correction`).
+                _ => {
+                    magic_core::invert::dated_part(&model, t, &mut dated)
+                        .map_err(|e| anyhow::anyhow!("{e}"))?;
+                    (0..inv.n_obs)
+                        .map(|c| {
+                            let f = inv.physics[c] - dated[c];
+                            ((f - self.mean[c] as f64) / self.scale[c] as f64) as f32
+                        })
+                        .collect()
+                }
             });
         }
         Ok(out)

@@ -16,7 +16,7 @@
 
 use super::pixel::N_VARIABLES;
 use anyhow::{bail, Result};
-use magic_core::invert::{forward, model_decoder, Workspace};
+use magic_core::invert::{forward, model_correction, Workspace};
 use magic_core::invert_at;
 use magic_core::model_file::{Model, Problem, Variant};
 use magic_core::rtm::inform::crown_from_cover;
@@ -68,14 +68,10 @@ pub fn reconstruct(
     let mut y = vec![0.0; n];
     forward(model, z, t_day, &mut y).map_err(|e| anyhow::anyhow!("forward model: {e}"))?;
     if model.variant == Variant::C {
-        let s: Vec<f32> = (0..n)
-            .map(|i| ((y[i] - model.obs_mean.get(i) as f64) / model.obs_scale.get(i) as f64) as f32)
-            .collect();
-        let mut c = vec![0f32; n];
-        model_decoder(model, &s, &mut c, ws).map_err(|e| anyhow::anyhow!("correction: {e}"))?;
-        for i in 0..n {
-            y[i] = (c[i] * model.obs_scale.get(i) + model.obs_mean.get(i)) as f64;
-        }
+        let mut recon = vec![0.0; n];
+        model_correction(model, &y, t_day, &mut recon, ws)
+            .map_err(|e| anyhow::anyhow!("correction: {e}"))?;
+        return Ok(recon);
     }
     Ok(y)
 }
