@@ -2,7 +2,7 @@
 //!
 //! `magic_core::line::parse_obs` uses `str::parse::<f32>` and `write_result` uses `{:.6}` on
 //! `f64`: on the board those two pull in about 26 KB of flash (the decimal-to-float tables and
-//! the float-to-decimal algorithms), more than half of the 48 KiB budget once the model is in. This
+//! the float-to-decimal algorithms), more than half of the 49 KiB budget once the model is in. This
 //! module reads and writes the same text in integer arithmetic (no soft-float f64 either):
 //!
 //! * [`parse_obs_bytes`] has the contract of `magic_core::line::parse_obs` (same fields, same

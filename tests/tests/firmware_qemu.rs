@@ -356,7 +356,7 @@ fn firmware_agrees_with_the_host() {
 
 /// A model with every effect family declared (latent: common mode, elevation, two second
 /// sources; time-dependent: seasonal, step, drift) reads a date on every line; the board must agree with
-/// `invert_at` on the host, and fit the 48 KiB flash budget (the link would fail otherwise).
+/// `invert_at` on the host, and fit the 49 KiB flash budget (the link would fail otherwise).
 #[test]
 fn effects_models_run_on_the_firmware() {
     if !toolchain_ready() {

@@ -235,7 +235,7 @@ fn check_updates(t: &Transcript, sc: &Script, u: &Updates) {
     );
     assert_eq!(
         answer("version", n_lines(&u.old_version) - 1),
-        "model,error,model: model format version 4 is not supported (this build reads 5)"
+        "model,error,model: model format version 4 is not supported (this build reads 6)"
     );
     assert_eq!(
         answer("upload C", n_lines(c) - 1),
