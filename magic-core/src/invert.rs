@@ -9,7 +9,7 @@
 //! reconstruction; they are left out of the residual and reported in the flags and the station
 //! mask.
 
-use crate::effects::mogi_with_effects_of;
+use crate::effects::{mogi_undated_of, mogi_with_effects_of};
 use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
 use crate::nn::{run, run_scratch, Scratch};
 use crate::rtm::inform::crown_from_cover;
@@ -386,21 +386,32 @@ fn pass<R: Real, P: Problems, Q: Probe>(
             destandardise(model, y, &mut out.recon[..n_obs], false)?;
         }
         Variant::B | Variant::C => {
+            // C sees F₀, F without its dated terms D(t), which are added after it
+            // ([`model_correction`]): where a C model has dated terms, F₀ and D(t) are evaluated
+            // apart (D into `recon`, which C's output is then added onto), and F = F₀ + D(t) is
+            // reported.
+            let c = model.variant == Variant::C;
+            let dated = c && model.effects.iter().any(|e| e.is_dated());
+            let (physics, recon) = (&mut out.physics[..n_obs], &mut out.recon[..n_obs]);
             probe.begin(Part::Forward);
-            forward_for::<R, P>(
-                model,
-                &out.params[..n_params],
-                t_day,
-                &mut out.physics[..n_obs],
-            )?;
+            forward_terms_for::<R, P>(model, &out.params[..n_params], t_day, physics, !dated)?;
+            if dated {
+                dated_part(model, t_day, recon)?;
+            }
             probe.end(Part::Forward);
-            if model.variant == Variant::C {
+            if c {
                 probe.begin(Part::Correction);
-                let (physics, recon) = (&out.physics[..n_obs], &mut out.recon[..n_obs]);
-                model_correction(model, physics, t_day, recon, ws)?;
+                correction_input(model, physics.iter().copied(), ws);
+                if dated {
+                    for (f, d) in physics.iter_mut().zip(recon.iter()) {
+                        *f = *f + *d;
+                    }
+                }
+                let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
+                destandardise(model, y, recon, dated)?;
                 probe.end(Part::Correction);
             } else {
-                out.recon[..n_obs].copy_from_slice(&out.physics[..n_obs]);
+                recon.copy_from_slice(physics);
             }
         }
     }
@@ -429,7 +440,7 @@ pub fn model_decoder(
 
 /// The correction C of a variant-C model: F's values `physics` (physical units) of an observation
 /// on day `t_day` → the reconstruction `recon`. C sees F without its dated terms
-/// ([`Effect::is_dated`](crate::effects::Effect::is_dated): annual terms, steps, drifts),
+/// ([`Effect::is_dated`](crate::effects::Effect::is_dated): steps and drifts),
 /// standardised, and those terms are added to its output: C, fitted over the training years,
 /// corrects the physics of the source and its latent effects, and a term that grows with the
 /// date cannot take C's input where it was never fitted.
@@ -444,14 +455,21 @@ pub fn model_correction<R: Real>(
     let n_obs = physics.len();
     // The dated terms first, into `recon`, which C's output is then added onto.
     dated_part(model, t_day, recon)?;
-    let input = ws.nn.input();
-    let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
-    for ((f, p), d) in input.iter_mut().zip(physics).zip(recon.iter()) {
-        let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
-        *f = (R::value(*p - *d) as f32 - mean) / scale;
-    }
+    let undated = physics.iter().zip(recon.iter()).map(|(p, d)| *p - *d);
+    correction_input(model, undated, ws);
     let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
     destandardise(model, y, recon, true)
+}
+
+/// C's input: F₀ (F without its dated terms, physical units) standardised into the network's
+/// input.
+fn correction_input<R: Real>(model: &Model<'_>, f0: impl Iterator<Item = R>, ws: &mut Workspace) {
+    let input = ws.nn.input();
+    let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
+    for (f, p) in input.iter_mut().zip(f0) {
+        let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
+        *f = (R::value(p) as f32 - mean) / scale;
+    }
 }
 
 /// The terms of the model's F that depend on the date alone on day `t_day` (physical units),
@@ -487,9 +505,23 @@ pub fn forward_for<R: Real, P: Problems>(
     t_day: f64,
     out: &mut [R],
 ) -> Result<(), Error> {
+    forward_terms_for::<R, P>(model, params, t_day, out, true)
+}
+
+/// [`forward_for`], without the dated terms unless `dated` (F₀; the forest problem has none).
+fn forward_terms_for<R: Real, P: Problems>(
+    model: &Model<'_>,
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+    dated: bool,
+) -> Result<(), Error> {
     match &model.problem {
-        Problem::Mogi { stations, .. } => {
+        Problem::Mogi { stations, .. } if dated => {
             mogi_with_effects_of(stations, &model.effects, params, t_day, out)
+        }
+        Problem::Mogi { stations, .. } => {
+            mogi_undated_of(stations, &model.effects, params, t_day, out)
         }
         Problem::Rtm { .. } if !P::RTM => Err(Error::WrongProblem),
         Problem::Rtm {

@@ -33,8 +33,9 @@ pub trait Physics: Send + Sync {
         out: &mut [f64],
         jac: &mut [f64],
     ) -> Result<(), magic_core::Error>;
-    /// The terms of F that depend on the date alone on day `t` (`out` overwritten; zero by
-    /// default): a variant-C model corrects F without them and adds them after C
+    /// F's dated terms on day `t` (`magic_core::effects::Effect::is_dated`: steps and drifts;
+    /// `out` overwritten; zero by default): a variant-C model corrects F without them and adds
+    /// them after C
     /// (`magic_core::invert::model_correction`).
     fn dated(&self, t: f64, out: &mut [f64]) -> Result<(), magic_core::Error> {
         let _ = t;

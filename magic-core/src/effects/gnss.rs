@@ -205,6 +205,30 @@ pub fn mogi_with_effects_of<R: Real, N: Network + ?Sized>(
     t_day: f64,
     out: &mut [R],
 ) -> Result<(), Error> {
+    mogi_terms_of(stations, effects, params, t_day, out, true)
+}
+
+/// F₀: [`mogi_with_effects_of`] without the dated terms ([`Effect::is_dated`]), the part of F
+/// a variant-C model's correction sees; F = F₀ + [`dated_part_of`].
+pub fn mogi_undated_of<R: Real, N: Network + ?Sized>(
+    stations: &N,
+    effects: &[Effect<'_>],
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+) -> Result<(), Error> {
+    mogi_terms_of(stations, effects, params, t_day, out, false)
+}
+
+/// The Mogi field and the effects' terms, the dated ones only if `dated` (one body for F and F₀).
+fn mogi_terms_of<R: Real, N: Network + ?Sized>(
+    stations: &N,
+    effects: &[Effect<'_>],
+    params: &[R],
+    t_day: f64,
+    out: &mut [R],
+    dated: bool,
+) -> Result<(), Error> {
     let p: [R; mogi::N_PARAMS] = params
         .get(..mogi::N_PARAMS)
         .and_then(|s| s.try_into().ok())
@@ -222,14 +246,16 @@ pub fn mogi_with_effects_of<R: Real, N: Network + ?Sized>(
             expected: k + n,
             found: params.len(),
         })?;
-        e.apply_to(stations, lat, t_day, out)?;
+        if dated || !e.is_dated() {
+            e.apply_to(stations, lat, t_day, out)?;
+        }
         k += n;
     }
     Ok(())
 }
 
-/// The terms of F that depend on the date alone ([`Effect::is_dated`]) on day `t_day`, written
-/// over `out` (zero where the model declares none).
+/// F's dated terms ([`Effect::is_dated`]: steps and drifts) on day `t_day`, written over `out`
+/// (zero where the model declares none).
 pub fn dated_part_of<R: Real, N: Network + ?Sized>(
     stations: &N,
     effects: &[Effect<'_>],
@@ -344,6 +370,10 @@ mod tests {
         let mut before = [0.0f64; 6];
         mogi_with_effects(&NET, &effects, &p, 99.0, &mut before).unwrap();
         mogi_with_effects(&NET, &effects, &p, 100.0, &mut f).unwrap();
+        // F₀, F without its dated terms, is the same before and after the epoch.
+        let mut undated = [0.0f64; 6];
+        mogi_undated_of(&NET[..], &effects, &p, 100.0, &mut undated).unwrap();
+        assert_eq!(undated, before);
         for i in 0..6 {
             // (Equal up to the rounding of adding the step and taking it off again.)
             assert!((f[i] - dated[i] - before[i]).abs() <= 1e-12, "channel {i}");

@@ -23,7 +23,7 @@
 pub mod gnss;
 pub mod rtm;
 
-pub use gnss::{dated_part_of, mogi_with_effects, mogi_with_effects_of};
+pub use gnss::{dated_part_of, mogi_undated_of, mogi_with_effects, mogi_with_effects_of};
 pub use rtm::{rtm_add_offsets, rtm_fixed_at, ILLUMINATION_NEEDS_PHYSICAL};
 
 use crate::quant::LeF32;
@@ -120,16 +120,15 @@ impl Effect<'_> {
         )
     }
 
-    /// Whether the effect is a function of the date alone: no latent variable, the same term for
-    /// every observation of a day (annual and semiannual terms, steps, drifts). A variant-C model
-    /// corrects F without these terms and adds them after C ([`crate::invert::model_correction`]):
-    /// C is fitted over the training years, and a term that grows with time (a drift) would take
-    /// its input where it was never fitted.
+    /// Whether the effect is a dated term: a function of the date alone that holds a date of its
+    /// own and moves the series for good from it (a step from its epoch, a drift from its t0). A
+    /// variant-C model corrects F without these terms and adds them after C
+    /// ([`crate::invert::model_correction`]): C is fitted over the training years, and a term that
+    /// leaves their range (a drift that keeps growing, a step after them) would take C's input
+    /// where it was never fitted. Annual terms come back every year, so the training years hold
+    /// their whole range: they stay in C's input, where C can correct their declared shape.
     pub fn is_dated(&self) -> bool {
-        matches!(
-            self,
-            Effect::Seasonal { .. } | Effect::Step { .. } | Effect::Drift { .. }
-        )
+        matches!(self, Effect::Step { .. } | Effect::Drift { .. })
     }
 
     /// [`Error::InvalidEffect`] for this effect.

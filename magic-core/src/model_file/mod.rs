@@ -18,7 +18,7 @@
 //! in the file (the `SMLAD` kernel's layout), and leaves out the per-row arrays an int8 layer's
 //! place in its chain does not use (weight scales of requantised layers, multipliers and shifts
 //! of dequantised ones); 6 feeds a variant-C model's correction F without its dated terms
-//! (annual terms, steps, drifts), which are added after it ([`crate::invert::model_correction`]).
+//! (steps and drifts), which are added after it ([`crate::invert::model_correction`]).
 //! A version-5 file is read where that changes nothing (not variant C, or no dated term) and
 //! refused where it would change its reconstructions.
 
