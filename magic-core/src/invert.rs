@@ -9,7 +9,7 @@
 //! reconstruction; they are left out of the residual and reported in the flags and the station
 //! mask.
 
-use crate::effects::{mogi_undated_of, mogi_with_effects_of};
+use crate::effects::mogi_terms_of;
 use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
 use crate::nn::{run, run_scratch, Scratch};
 use crate::rtm::inform::crown_from_cover;
@@ -472,8 +472,9 @@ fn correction_input<R: Real>(model: &Model<'_>, f0: impl Iterator<Item = R>, ws:
     }
 }
 
-/// The terms of the model's F that depend on the date alone on day `t_day` (physical units),
-/// written over `out`: zero for a model without them (and for the forest-spectra problem).
+/// The model's dated terms ([`Effect::is_dated`](crate::effects::Effect::is_dated): steps and
+/// drifts) on day `t_day` (physical units), written over `out`: zero for a model without them
+/// (and for the forest-spectra problem).
 pub fn dated_part<R: Real>(model: &Model<'_>, t_day: f64, out: &mut [R]) -> Result<(), Error> {
     match &model.problem {
         Problem::Mogi { stations, .. } => {
@@ -517,11 +518,8 @@ fn forward_terms_for<R: Real, P: Problems>(
     dated: bool,
 ) -> Result<(), Error> {
     match &model.problem {
-        Problem::Mogi { stations, .. } if dated => {
-            mogi_with_effects_of(stations, &model.effects, params, t_day, out)
-        }
         Problem::Mogi { stations, .. } => {
-            mogi_undated_of(stations, &model.effects, params, t_day, out)
+            mogi_terms_of(stations, &model.effects, params, t_day, out, dated)
         }
         Problem::Rtm { .. } if !P::RTM => Err(Error::WrongProblem),
         Problem::Rtm {

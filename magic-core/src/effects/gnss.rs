@@ -194,34 +194,13 @@ pub fn mogi_with_effects<R: Real>(
     t_day: f64,
     out: &mut [R],
 ) -> Result<(), Error> {
-    mogi_with_effects_of(stations, effects, params, t_day, out)
-}
-
-/// [`mogi_with_effects`] for any [`Network`] (e.g. the stations of a model file).
-pub fn mogi_with_effects_of<R: Real, N: Network + ?Sized>(
-    stations: &N,
-    effects: &[Effect<'_>],
-    params: &[R],
-    t_day: f64,
-    out: &mut [R],
-) -> Result<(), Error> {
     mogi_terms_of(stations, effects, params, t_day, out, true)
 }
 
-/// F₀: [`mogi_with_effects_of`] without the dated terms ([`Effect::is_dated`]), the part of F
-/// a variant-C model's correction sees; F = F₀ + [`dated_part_of`].
-pub fn mogi_undated_of<R: Real, N: Network + ?Sized>(
-    stations: &N,
-    effects: &[Effect<'_>],
-    params: &[R],
-    t_day: f64,
-    out: &mut [R],
-) -> Result<(), Error> {
-    mogi_terms_of(stations, effects, params, t_day, out, false)
-}
-
-/// The Mogi field and the effects' terms, the dated ones only if `dated` (one body for F and F₀).
-fn mogi_terms_of<R: Real, N: Network + ?Sized>(
+/// [`mogi_with_effects`] for any [`Network`] (e.g. the stations of a model file) if `dated`,
+/// else F₀: F without its dated terms ([`Effect::is_dated`]), the part of F a variant-C model's
+/// correction sees, with F = F₀ + [`dated_part_of`].
+pub fn mogi_terms_of<R: Real, N: Network + ?Sized>(
     stations: &N,
     effects: &[Effect<'_>],
     params: &[R],
@@ -372,7 +351,7 @@ mod tests {
         mogi_with_effects(&NET, &effects, &p, 100.0, &mut f).unwrap();
         // F₀, F without its dated terms, is the same before and after the epoch.
         let mut undated = [0.0f64; 6];
-        mogi_undated_of(&NET[..], &effects, &p, 100.0, &mut undated).unwrap();
+        mogi_terms_of(&NET[..], &effects, &p, 100.0, &mut undated, false).unwrap();
         assert_eq!(undated, before);
         for i in 0..6 {
             // (Equal up to the rounding of adding the step and taking it off again.)

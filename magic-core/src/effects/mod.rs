@@ -23,7 +23,7 @@
 pub mod gnss;
 pub mod rtm;
 
-pub use gnss::{dated_part_of, mogi_undated_of, mogi_with_effects, mogi_with_effects_of};
+pub use gnss::{dated_part_of, mogi_terms_of, mogi_with_effects};
 pub use rtm::{rtm_add_offsets, rtm_fixed_at, ILLUMINATION_NEEDS_PHYSICAL};
 
 use crate::quant::LeF32;
