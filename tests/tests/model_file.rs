@@ -203,4 +203,16 @@ fn a_version_5_file_is_read_where_it_means_what_it_meant() {
         }
     );
     assert!(Model::decode(&c_with_drift().encode().unwrap()).is_ok());
+    // The CLI says what to do with it.
+    let path = std::path::Path::new("old.magic");
+    let msg = format!(
+        "{:#}",
+        magic_train::cli::args::decode(path, &as_v5(&c_with_drift())).unwrap_err()
+    );
+    assert!(
+        msg.starts_with("old.magic: not a usable model file ("),
+        "{msg}"
+    );
+    assert!(msg.contains("train it again with this build"), "{msg}");
+    assert!(msg.ends_with("(this build reads 6)"), "{msg}");
 }

@@ -114,9 +114,19 @@ pub fn read_model(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).with_context(|| format!("{}: cannot read model file", path.display()))
 }
 
-/// Decodes model bytes read from `path` (errors name the file).
+/// Decodes model bytes read from `path` (errors name the file, and say what to do with a
+/// format-5 C model whose steps or drifts the correction saw then).
 pub fn decode<'a>(path: &Path, bytes: &'a [u8]) -> Result<Model<'a>> {
-    Model::decode(bytes).with_context(|| format!("{}: not a usable model file", path.display()))
+    Model::decode(bytes).map_err(|e| {
+        let hint = match e {
+            magic_core::Error::UnsupportedVersion { found: 5, .. } => {
+                " (a variant-C model with steps or drifts, written when C saw them; since format \
+                 6 they are added after C: train it again with this build)"
+            }
+            _ => "",
+        };
+        anyhow::Error::new(e).context(format!("{}: not a usable model file{hint}", path.display()))
+    })
 }
 
 /// The warm-up of early stopping (`--warmup`), on every command that trains with a recipe.
