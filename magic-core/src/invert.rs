@@ -404,7 +404,7 @@ fn pass<R: Real, P: Problems, Q: Probe>(
                 correction_input(model, physics.iter().copied(), ws);
                 if dated {
                     for (f, d) in physics.iter_mut().zip(recon.iter()) {
-                        *f = *f + *d;
+                        *f += *d;
                     }
                 }
                 let y = run_scratch(&model.decoder, n_obs, &mut ws.nn)?;
