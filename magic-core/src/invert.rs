@@ -391,7 +391,7 @@ fn pass<R: Real, P: Problems, Q: Probe>(
             // apart (D into `recon`, which C's output is then added onto), and F = F₀ + D(t) is
             // reported.
             let c = model.variant == Variant::C;
-            let dated = c && model.effects.iter().any(|e| e.is_dated());
+            let dated = model.dated_after_correction();
             let (physics, recon) = (&mut out.physics[..n_obs], &mut out.recon[..n_obs]);
             probe.begin(Part::Forward);
             forward_terms_for::<R, P>(model, &out.params[..n_params], t_day, physics, !dated)?;

@@ -273,6 +273,12 @@ impl<'a> Model<'a> {
         self.obs_mean.len()
     }
 
+    /// Whether the model is a variant C with dated terms ([`Effect::is_dated`]), which are added
+    /// after its correction ([`crate::invert::model_correction`]).
+    pub fn dated_after_correction(&self) -> bool {
+        self.variant == Variant::C && self.effects.iter().any(|e| e.is_dated())
+    }
+
     /// Number of physical variables the encoder outputs (latent size for variant A).
     pub fn n_params(&self) -> usize {
         self.encoder.last().map_or(0, |l| l.rows as usize)
@@ -338,9 +344,7 @@ impl<'a> Model<'a> {
     pub fn decode_in_place<P: Problems>(&mut self, bytes: &'a [u8]) -> Result<(), Error> {
         let (version, body) = Self::checked_body(bytes)?;
         self.decode_body(body).map_err(|_| Error::Decode)?;
-        let dated_correction =
-            self.variant == Variant::C && self.effects.iter().any(|e| e.is_dated());
-        if version < VERSION && dated_correction {
+        if version < VERSION && self.dated_after_correction() {
             // Written when C saw the dated terms too: this build would reconstruct otherwise.
             return Err(Error::UnsupportedVersion {
                 found: version,
