@@ -261,6 +261,9 @@ impl Net {
     /// F's dated terms on each of `days` `(batch, 1)`, standardised (divided by the scale, no
     /// mean): `(batch, n_obs)`, or `None` where they are zero on every day.
     fn dated(&self, phys: &dyn Physics, days: &Tensor) -> Result<Option<Tensor>> {
+        if !phys.has_dated() {
+            return Ok(None);
+        }
         let days = days.flatten_all()?.to_dtype(DType::F64)?.to_vec1::<f64>()?;
         let n = self.scale.len();
         let mut d = vec![0f32; days.len() * n];

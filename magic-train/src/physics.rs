@@ -42,6 +42,11 @@ pub trait Physics: Send + Sync {
         out.fill(0.0);
         Ok(())
     }
+    /// Whether F holds dated terms at all ([`Physics::dated`] nonzero on some day); `false` (the
+    /// default) lets a caller skip evaluating them.
+    fn has_dated(&self) -> bool {
+        false
+    }
     /// Where [`PhysicsOp`] keeps Jacobians its forward pass computed for its backward pass; `None`
     /// (the default): the forward pass computes values only, the backward pass the Jacobian.
     fn jacobian_reuse(&self) -> Option<&JacobianReuse> {

@@ -67,6 +67,9 @@ impl Physics for MogiPhysics {
     fn dated(&self, t: f64, out: &mut [f64]) -> Result<(), Error> {
         self.with_effects(|eff| dated_part_of(&self.stations[..], eff, t, out))
     }
+    fn has_dated(&self) -> bool {
+        self.effects.iter().any(|e| e.borrow(&[]).is_dated())
+    }
     fn jacobian(&self, p: &[f64], t: f64, out: &mut [f64], jac: &mut [f64]) -> Result<(), Error> {
         let n = self.n_params();
         if n > MAX_DUAL || p.len() != n {
@@ -99,5 +102,45 @@ impl Physics for MogiPhysics {
             jac[c * n..(c + 1) * n].copy_from_slice(&oc.d[..n]);
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gnss::synth;
+
+    #[test]
+    fn has_dated_says_whether_the_dated_terms_can_be_nonzero() {
+        let stations = synth::generate(synth::Scenario::Clean, 1)
+            .problem
+            .network
+            .stations;
+        let step = OwnedEffect::Step {
+            station: 1,
+            epoch_day: 14_000.0,
+            offset_mm: [1.0, 2.0, 3.0],
+        };
+        let drift = OwnedEffect::Drift {
+            t0_day: 14_000.0,
+            rate: vec![1.0; 3 * stations.len()],
+        };
+        let annual = OwnedEffect::Seasonal {
+            coef: vec![1.0; 4 * 3 * stations.len()],
+        };
+        let cases = [
+            (vec![], false),
+            (vec![OwnedEffect::CommonMode, annual.clone()], false),
+            (vec![OwnedEffect::CommonMode, step], true),
+            (vec![annual, drift], true),
+        ];
+        for (effects, dated) in cases {
+            let phys = MogiPhysics::new(stations.clone(), effects.clone());
+            assert_eq!(phys.has_dated(), dated, "{effects:?}");
+            // On a day after both the step's epoch and the drift's reference day.
+            let mut out = vec![0.0; phys.n_obs()];
+            phys.dated(14_100.0, &mut out).unwrap();
+            assert_eq!(out.iter().any(|v| *v != 0.0), dated, "{effects:?}");
+        }
     }
 }
