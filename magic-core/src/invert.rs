@@ -464,9 +464,48 @@ pub fn model_correction<R: Real>(
 /// C's input: F₀ (F without its dated terms, physical units) standardised into the network's
 /// input.
 fn correction_input<R: Real>(model: &Model<'_>, f0: impl Iterator<Item = R>, ws: &mut Workspace) {
-    let input = ws.nn.input();
+    standardise_values(model, f0, ws.nn.input());
+}
+
+/// C's input for F's values `physics` (physical units, dated terms included) on day `t_day`,
+/// written over `out[..physics.len()]`: F without its dated terms, standardised — what
+/// [`model_correction`] feeds C, for callers that run C themselves (finite differences through
+/// it, the int8 export's calibration).
+pub fn correction_input_of<R: Real>(
+    model: &Model<'_>,
+    physics: &[R],
+    t_day: f64,
+    out: &mut [f32],
+) -> Result<(), Error> {
+    let (n, found) = (physics.len(), out.len());
+    let out = out.get_mut(..n).ok_or(Error::SizeMismatch {
+        what: "correction input",
+        expected: n,
+        found,
+    })?;
+    let mut dated = [R::zero(); MAX_OBS];
+    let dated = dated.get_mut(..n).ok_or(Error::SizeMismatch {
+        what: "observations",
+        expected: MAX_OBS,
+        found: n,
+    })?;
+    dated_part(model, t_day, dated)?;
+    standardise_values(
+        model,
+        physics.iter().zip(dated.iter()).map(|(p, d)| *p - *d),
+        out,
+    );
+    Ok(())
+}
+
+/// `values` (physical units) standardised by the model's observation means and scales into `out`.
+fn standardise_values<R: Real>(
+    model: &Model<'_>,
+    values: impl Iterator<Item = R>,
+    out: &mut [f32],
+) {
     let (mut means, mut scales) = (model.obs_mean.iter(), model.obs_scale.iter());
-    for (f, p) in input.iter_mut().zip(f0) {
+    for (f, p) in out.iter_mut().zip(values) {
         let (mean, scale) = (means.next().unwrap_or(0.0), scales.next().unwrap_or(0.0));
         *f = (R::value(p) as f32 - mean) / scale;
     }

@@ -28,7 +28,7 @@
 //! standard deviations by factors measured on synthetic spectra with known variables
 //! ([`Uncertainty::scaled`]).
 
-use crate::invert::{dated_part, forward_for, model_decoder, Inversion, Workspace};
+use crate::invert::{correction_input_of, forward_for, model_decoder, Inversion, Workspace};
 use crate::model_file::{AnyProblem, Model, Problem, Problems, Variant, MAX_OBS, MAX_PARAMS};
 use crate::rtm::inform::crown_from_cover;
 use crate::rtm::N_LEARNED;
@@ -375,14 +375,9 @@ fn correction_jacobian(
 ) -> Result<(), Error> {
     let (n, p) = (model.n_obs().min(MAX_OBS), p.min(MAX_PARAMS));
     let (mut plus, mut minus) = ([0f32; MAX_OBS], [0f32; MAX_OBS]);
-    // C's input: F without its dated terms (`invert::model_correction`), which do not depend on
-    // the variables; `plus` holds those terms until the loop below overwrites it.
-    dated_part::<f32>(model, t_day, &mut plus[..n])?;
+    // C's input: F without its dated terms, which do not depend on the variables, standardised.
     let mut f = [0f32; MAX_OBS];
-    for (i, fi) in f.iter_mut().enumerate().take(n) {
-        let dated = plus[i] as f64;
-        *fi = ((sw.y[i] - dated - model.obs_mean.get(i) as f64) / scale(model, i)?) as f32;
-    }
+    correction_input_of(model, &sw.y[..n], t_day, &mut f[..n])?;
     let (mut up, mut down) = ([0f32; MAX_OBS], [0f32; MAX_OBS]);
     for k in 0..p {
         // The direction: column k in standardised units, normalised.

@@ -384,18 +384,31 @@ mod tests {
             .to_vec2::<f32>()
             .unwrap();
         let mut ws = magic_core::Workspace::default();
-        let mut worst = 0f64;
+        let (mut worst, mut worst_input) = (0f64, 0f64);
+        let (mut input, mut y, mut dated) = ([0f32; 36], [0f32; 36], [0f64; 36]);
         for ((row, t), r) in rows.x.iter().zip(&days).zip(&recon) {
             let obs: Vec<f32> = (0..36)
                 .map(|c| row[c] * core.obs_scale.get(c) + core.obs_mean.get(c))
                 .collect();
             let inv = magic_core::invert_at::<f64>(&core, &obs, *t, &mut ws).unwrap();
+            // C run on `correction_input_of` (as the int8 calibration and the standard
+            // deviations do), its dated terms added back: the inversion's reconstruction.
+            let physics = inv.physics;
+            magic_core::invert::correction_input_of(&core, &physics[..36], *t, &mut input).unwrap();
+            magic_core::invert::model_decoder(&core, &input, &mut y, &mut ws).unwrap();
+            magic_core::invert::dated_part(&core, *t, &mut dated).unwrap();
             for c in 0..36 {
                 let (m, sc) = (core.obs_mean.get(c) as f64, core.obs_scale.get(c) as f64);
                 worst = worst.max(((inv.recon[c] - m) / sc - r[c] as f64).abs());
+                let again = y[c] as f64 * sc + m + dated[c];
+                worst_input = worst_input.max((again - inv.recon[c]).abs() / sc);
             }
         }
         // f32 networks on both sides (candle's kernels and the core's): rounding only.
         assert!(worst < 1e-4, "trainer and core differ by {worst}");
+        assert!(
+            worst_input < 1e-5,
+            "C on correction_input_of differs by {worst_input}"
+        );
     }
 }

@@ -56,7 +56,6 @@ impl OwnedModel {
         let model = Model::decode(&bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
         let mut ws = magic_core::Workspace::default();
         let mut out = Vec::with_capacity(x.len());
-        let mut dated = vec![0f64; model.n_obs()];
         for (i, row) in x.iter().enumerate() {
             let obs: Vec<f32> = row
                 .iter()
@@ -71,16 +70,17 @@ impl OwnedModel {
                     .iter()
                     .map(|v| *v as f32)
                     .collect(),
-                // C's input: F without its dated terms (`magic_core::invert::model_correction`).
+                // C's input: F without its dated terms, as `invert::model_correction` feeds it.
                 _ => {
-                    magic_core::invert::dated_part(&model, t, &mut dated)
-                        .map_err(|e| anyhow::anyhow!("{e}"))?;
-                    (0..inv.n_obs)
-                        .map(|c| {
-                            let f = inv.physics[c] - dated[c];
-                            ((f - self.mean[c] as f64) / self.scale[c] as f64) as f32
-                        })
-                        .collect()
+                    let mut input = vec![0f32; inv.n_obs];
+                    magic_core::invert::correction_input_of(
+                        &model,
+                        &inv.physics[..inv.n_obs],
+                        t,
+                        &mut input,
+                    )
+                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+                    input
                 }
             });
         }
