@@ -184,6 +184,40 @@ impl Candidate {
             })
     }
 
+    /// A candidate read back from a report (its serde form, as `magic loop`'s `report.json`
+    /// writes it): family, scores, verdict, parameters and effect; the surrogates' scores, the
+    /// statistic, the rejection and the standard deviations are not read back. A number written
+    /// as `null` (NaN) reads as NaN.
+    pub fn from_report(v: &serde_json::Value) -> Result<Candidate, String> {
+        use serde_json::Value;
+        let num = |k: &str| v.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+        let family = v
+            .get("family")
+            .and_then(Value::as_str)
+            .ok_or("a candidate without a family")?;
+        let effect = match v.get("effect") {
+            None | Some(Value::Null) => None,
+            Some(e) => Some(
+                serde_json::from_value(e.clone())
+                    .map_err(|err| format!("the effect of a {family} candidate: {err}"))?,
+            ),
+        };
+        Ok(Candidate {
+            family: family.into(),
+            variance_explained: num("variance_explained"),
+            chance_level: num("chance_level"),
+            significant: v.get("significant").and_then(Value::as_bool) == Some(true),
+            params: v.get("params").cloned().unwrap_or(Value::Null),
+            effect,
+            chance_sd: num("chance_sd"),
+            margin: num("margin"),
+            surrogate_scores: vec![],
+            statistic: None,
+            rejected: None,
+            uncertainty: vec![],
+        })
+    }
+
     /// `family (explained vs chance)` with three decimals, as the loop tables print it.
     pub fn short(&self) -> String {
         format!(
@@ -208,6 +242,36 @@ pub fn rank(effects: &mut [Candidate]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_candidate_reads_back_from_its_report() {
+        let noise = vec![0.010, 0.012, 0.008, 0.011, 0.009, 0.010, 0.013, 0.007];
+        let effect = OwnedEffect::Step {
+            station: 3,
+            epoch_day: 16_000.0,
+            offset_mm: [1.5, -2.0, 8.25],
+        };
+        let params = json!({"station": "AV13", "epoch": "2013-10-23"});
+        let c = Candidate::from_scores("step", 0.2, noise, 0.95, params, Some(effect));
+        let back = Candidate::from_report(&serde_json::to_value(&c).unwrap()).unwrap();
+        assert_eq!(
+            (&back.family, &back.params, &back.effect, back.significant),
+            (&c.family, &c.params, &c.effect, c.significant)
+        );
+        assert_eq!(
+            [
+                back.variance_explained,
+                back.chance_level,
+                back.chance_sd,
+                back.margin
+            ],
+            [c.variance_explained, c.chance_level, c.chance_sd, c.margin]
+        );
+        assert!(Candidate::from_report(&json!({"variance_explained": 0.1})).is_err());
+        let bad = json!({"family": "step", "effect": {"family": "step", "station": "AV13"}});
+        let err = Candidate::from_report(&bad).unwrap_err();
+        assert!(err.contains("the effect of a step candidate"), "{err}");
+    }
 
     #[test]
     fn significance_needs_the_margin_over_chance() {

@@ -14,10 +14,10 @@ use crate::gnss::recovery::{check_one, recovery_table};
 use crate::gnss::synth::truth::injected;
 use crate::gnss::synth::{self, NoiseModel, Scenario, Spec};
 use crate::problem::Problem;
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `magic synth`.
 #[derive(Args, Clone, Debug)]
@@ -252,6 +252,60 @@ pub struct SynthLoopCmd {
     /// Folder for each run's loop report (and the tables).
     #[arg(long, default_value = "out/synth-loop")]
     out: PathBuf,
+    /// Run nothing: rebuild the summary over the seeds from the runs already under this folder
+    /// (each run's `report.json` beside its `truth.json`; runs split over several processes, or
+    /// a stopped command's).
+    #[arg(long, value_name = "DIR")]
+    summarise: Option<PathBuf>,
+}
+
+/// `magic synth-loop --summarise DIR`: the summary table of the runs under `dir`, read back from
+/// their reports, in the order of their folders' paths.
+fn summarise(dir: &Path) -> Result<()> {
+    let mut folders = Vec::new();
+    run_folders(dir, &mut folders)?;
+    folders.sort();
+    if folders.is_empty() {
+        anyhow::bail!(
+            "{}: no run under it (a folder holding report.json and truth.json)",
+            dir.display()
+        );
+    }
+    let read = |f: &Path, name: &str| -> Result<serde_json::Value> {
+        let path = f.join(name);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("{}: cannot read it", path.display()))?;
+        serde_json::from_str(&text).with_context(|| format!("{}: not JSON", path.display()))
+    };
+    let mut runs = Vec::new();
+    for f in &folders {
+        let run = LoopRun::from_report(&read(f, "truth.json")?, &read(f, "report.json")?)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", f.join("report.json").display()))?;
+        runs.push(run);
+    }
+    print!(
+        "{} runs under {}: the kept additions against the truth, and the test MSE (mean ± sd):\n\n{}",
+        runs.len(),
+        dir.display(),
+        loop_table(&runs)
+    );
+    Ok(())
+}
+
+/// The folders under `dir` (itself included) that hold a run: `report.json` and `truth.json`.
+fn run_folders(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+    if dir.join("report.json").is_file() && dir.join("truth.json").is_file() {
+        out.push(dir.to_path_buf());
+    }
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("{}: cannot list it", dir.display()))?;
+    for e in entries {
+        let path = e?.path();
+        if path.is_dir() {
+            run_folders(&path, out)?;
+        }
+    }
+    Ok(())
 }
 
 /// A folder name for a scenario (`+` spelled `-and-`).
@@ -270,6 +324,9 @@ fn folder(spec: &Spec) -> String {
 /// line per run (the effects it added and kept, the test MSE of B and C before and after) and,
 /// over several seeds, a summary of what it recovered ([`loop_table`]).
 pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
+    if let Some(dir) = &a.summarise {
+        return summarise(dir);
+    }
     let mut table = String::from(
         "| injected | placement | noise | seed | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|---|\n",
     );
@@ -380,5 +437,26 @@ mod tests {
             folder(&Spec::new(Scenario::Clean, 1).noise(NoiseModel::Red)),
             "clean-red"
         );
+    }
+
+    #[test]
+    fn summarise_says_where_a_run_is_missing_or_broken() {
+        let dir = std::env::temp_dir().join(format!("magic-summarise-{}", std::process::id()));
+        let run = dir.join("step").join("seed-1");
+        std::fs::create_dir_all(&run).unwrap();
+        let err = summarise(&dir).unwrap_err().to_string();
+        assert!(err.contains("no run under it"), "{err}");
+        std::fs::write(
+            run.join("truth.json"),
+            r#"{"scenario": "step", "effects": []}"#,
+        )
+        .unwrap();
+        std::fs::write(run.join("report.json"), r#"{"loop": {"rounds": [}}"#).unwrap();
+        let err = format!("{:#}", summarise(&dir).unwrap_err());
+        assert!(err.contains("report.json: not JSON"), "{err}");
+        std::fs::write(run.join("report.json"), r#"{"loop": {}}"#).unwrap();
+        let err = summarise(&dir).unwrap_err().to_string();
+        assert!(err.contains("seed-1/report.json: no rounds"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

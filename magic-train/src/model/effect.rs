@@ -6,7 +6,7 @@ use magic_core::effects::Effect;
 use magic_core::quant::LeF32;
 
 /// A declared effect owned by the host (see `magic_core::effects::Effect`).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(tag = "family", rename_all = "snake_case")]
 pub enum OwnedEffect {
     /// Daily network translation (3 latent variables).

@@ -37,6 +37,38 @@ impl LoopRun {
         }
     }
 
+    /// A finished run read back: `report` the loop's report (`report.json` of `magic loop` and
+    /// `magic synth-loop`), `truth` the dataset's `truth.json` beside it.
+    pub fn from_report(
+        truth: &serde_json::Value,
+        report: &serde_json::Value,
+    ) -> Result<LoopRun, String> {
+        let rounds = report
+            .pointer("/loop/rounds")
+            .and_then(serde_json::Value::as_array)
+            .filter(|r| !r.is_empty())
+            .ok_or("no rounds under loop.rounds")?;
+        let kept = |r: &&serde_json::Value| r.get("kept").and_then(|k| k.as_bool()) == Some(true);
+        let added = rounds
+            .iter()
+            .filter(kept)
+            .filter_map(|r| r.get("added").filter(|a| !a.is_null()))
+            .map(Candidate::from_report)
+            .collect::<Result<Vec<_>, _>>()?;
+        let last = rounds.iter().rev().find(kept).unwrap_or(&rounds[0]);
+        let test_mse = |r: &serde_json::Value, v: &str| {
+            r.pointer(&format!("/{v}/mse/2"))
+                .and_then(serde_json::Value::as_f64)
+                .ok_or(format!("round {}: no {v}.mse", r["round"]))
+        };
+        Ok(LoopRun::new(
+            truth,
+            &added,
+            [test_mse(&rounds[0], "b")?, test_mse(last, "b")?],
+            [test_mse(&rounds[0], "c")?, test_mse(last, "c")?],
+        ))
+    }
+
     /// Every injected effect kept with its parameters recovered, and no false addition kept.
     pub fn ok(&self) -> bool {
         self.recovery.all_found() && self.recovery.false_additions.is_empty()
@@ -177,6 +209,38 @@ mod tests {
             "{row}"
         );
         assert!(row.contains("0.8000 ± 0.0000 → 0.7000 ± 0.1000"), "{row}");
+    }
+
+    #[test]
+    fn a_run_reads_back_from_its_report() {
+        let truth = json!({"scenario": "step", "noise": "paper", "placement": "train", "seed": 2,
+            "effects": [{"family": "step", "params": {"station": "AV13", "epoch": "2014-05-23",
+            "offset_mm": [1.0, 2.0, 8.0]}}]});
+        let step = added(
+            "step",
+            json!({"station": "AV13", "epoch": "2014-05-25", "offset_mm": [1.2, 2.1, 7.0]}),
+        );
+        let drift = added(
+            "drift",
+            json!({"rate_mm_per_yr": {"AV08": [1.0, 0.0, 0.0]}}),
+        );
+        let scores = |test: f64| json!({"mse": [0.5, 0.9, test], "best_epoch": 60});
+        // Round 2's drift was taken out again: the last kept round is 1.
+        let report = json!({"loop": {"rounds": [
+            {"round": 0, "added": null, "kept": true, "b": scores(0.8), "c": scores(0.9)},
+            {"round": 1, "added": step, "kept": true, "b": scores(0.7), "c": scores(0.85)},
+            {"round": 2, "added": drift, "kept": false, "b": scores(0.75), "c": scores(0.8)},
+        ]}});
+        let run = LoopRun::from_report(&truth, &report).unwrap();
+        let direct = LoopRun::new(&truth, &[step], [0.8, 0.7], [0.9, 0.85]);
+        assert!(run.ok());
+        assert_eq!(
+            (run.b, run.c, &run.added),
+            (direct.b, direct.c, &direct.added)
+        );
+        assert_eq!(loop_table(&[run]), loop_table(&[direct]));
+        let err = LoopRun::from_report(&truth, &json!({"loop": {"rounds": []}})).unwrap_err();
+        assert!(err.contains("no rounds"), "{err}");
     }
 
     #[test]
