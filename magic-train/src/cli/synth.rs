@@ -293,7 +293,24 @@ fn summarise(dir: &Path) -> Result<()> {
 }
 
 /// The folders under `dir` (itself included) that hold a run: `report.json` and `truth.json`.
+/// Links into folders are followed, each folder read once (by its canonical path), so a link
+/// back up the tree ends the walk there instead of recursing.
 fn run_folders(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    walk_runs(dir, &mut seen, out)
+}
+
+fn walk_runs(
+    dir: &Path,
+    seen: &mut std::collections::HashSet<PathBuf>,
+    out: &mut Vec<PathBuf>,
+) -> Result<()> {
+    let canonical = dir
+        .canonicalize()
+        .with_context(|| format!("{}: cannot resolve it", dir.display()))?;
+    if !seen.insert(canonical) {
+        return Ok(());
+    }
     if dir.join("report.json").is_file() && dir.join("truth.json").is_file() {
         out.push(dir.to_path_buf());
     }
@@ -302,7 +319,7 @@ fn run_folders(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
     for e in entries {
         let path = e?.path();
         if path.is_dir() {
-            run_folders(&path, out)?;
+            walk_runs(&path, seen, out)?;
         }
     }
     Ok(())
@@ -457,6 +474,23 @@ mod tests {
         std::fs::write(run.join("report.json"), r#"{"loop": {}}"#).unwrap();
         let err = summarise(&dir).unwrap_err().to_string();
         assert!(err.contains("seed-1/report.json: no rounds"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn run_folders_reads_each_folder_once_through_links() {
+        let dir = std::env::temp_dir().join(format!("magic-runs-{}", std::process::id()));
+        let run = dir.join("step").join("seed-1");
+        std::fs::create_dir_all(&run).unwrap();
+        std::fs::write(run.join("truth.json"), "{}").unwrap();
+        std::fs::write(run.join("report.json"), "{}").unwrap();
+        // A link back up the tree, and a second way into the same run.
+        std::os::unix::fs::symlink(&dir, run.join("up")).unwrap();
+        std::os::unix::fs::symlink(&run, dir.join("again")).unwrap();
+        let mut found = Vec::new();
+        run_folders(&dir, &mut found).unwrap();
+        assert_eq!(found.len(), 1, "{found:?}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }
