@@ -12,14 +12,16 @@
 //! step's term is zero on every training row, a source's volume never moves there. It is judged
 //! by B without and with it trained on interleaved blocks of the training and validation rows,
 //! in two folds that hold out every day from its onset on once ([`onset_folds`]), and scored on
-//! those days. The loop ends with a [`StopReason`] the report prints. Effects
+//! those days. An effect that comes back within the training years (a source's pulse) is the
+//! mirror case, one the validation years do not hold: judged the same way over its days
+//! ([`window_folds`]). The loop ends with a [`StopReason`] the report prints. Effects
 //! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
 //! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
 //! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
 //! where the problem has one, a classical baseline with the same declared effects.
 
 use crate::analysis::{analyse, AnalysisOptions, Candidate};
-use crate::data::{onset_folds, Split};
+use crate::data::{window_folds, Split};
 use crate::eval::{evaluate, evaluate_splits};
 use crate::model::OwnedEffect;
 use crate::problem::{Metric, Problem};
@@ -81,7 +83,8 @@ pub struct Round {
     pub candidates: Vec<Candidate>,
     /// Whether this round's F was kept (false when its added effect was taken out again).
     pub kept: bool,
-    /// How the keep rule judged the added effect when it starts after the training years.
+    /// How the keep rule judged the added effect when it starts after the training years or
+    /// comes back within them.
     pub interleaved: Option<Interleaved>,
 }
 
@@ -89,18 +92,23 @@ pub struct Round {
 /// months of daily rows, a whole number of the GNSS recipe's 5-day sequences.
 pub const KEEP_BLOCK_ROWS: usize = 60;
 
-/// The keep rule for an effect that starts after the training years: B's validation MSE without
-/// and with it, both trained on the same interleaved blocks ([`onset_folds`]).
+/// The keep rule for an effect that starts after the training years or comes back within
+/// them: B's validation MSE without and with it, both trained on the same interleaved blocks
+/// ([`window_folds`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct Interleaved {
     /// Rows per block.
     pub block: usize,
     /// B's validation MSE without and with the effect, on the held-out blocks' days from the
-    /// effect's onset on (before it the two differ only by training), over both folds.
+    /// effect's onset on — to its end, for an episode — (elsewhere the two differ only by
+    /// training), over both folds.
     pub valid: [f64; 2],
     /// How many held-out days that is (every day from the onset on in the training and
-    /// validation years).
+    /// validation years, or every day of the episode).
     pub days: usize,
+    /// Whether the effect is an episode within the training years (judged over its days) rather
+    /// than one that starts after them (judged from its onset on).
+    pub episode: bool,
 }
 
 /// Why the loop stopped.
@@ -127,8 +135,10 @@ pub enum StopReason {
         /// B's validation MSE before and after adding it.
         valid: [f64; 2],
         /// Whether they come from interleaved blocks (the effect starts after the training
-        /// years).
+        /// years, or comes back within them).
         interleaved: bool,
+        /// Whether the effect comes back within the training years (judged over its days).
+        episode: bool,
     },
     /// The round limit was reached.
     RoundLimit {
@@ -173,11 +183,12 @@ impl std::fmt::Display for StopReason {
                 family,
                 valid,
                 interleaved,
+                episode,
             } => {
-                let on = if *interleaved {
-                    " on interleaved blocks of the training and validation years, as it starts after the training years"
-                } else {
-                    ""
+                let on = match (*interleaved, *episode) {
+                    (false, _) => "",
+                    (true, false) => " on interleaved blocks of the training and validation years, as it starts after the training years",
+                    (true, true) => " on interleaved blocks of the training and validation years over its days, as it comes back within the training years",
                 };
                 write!(
                     f,
@@ -294,33 +305,47 @@ fn last_day(s: &Split) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
-/// The keep rule's figures for the last of `effects`, found to start on day `onset`
-/// ([`Candidate::onset_day`]), when that is after the training years and there are two blocks
-/// from it on; `None` otherwise. B without and with it is trained on each of the two folds
-/// ([`onset_folds`]) and scored on the fold's held-out days from the onset on (before it the two
-/// differ only by training); the figures are the means over those days of both folds.
+/// The days over which the keep rule judges `added` on interleaved blocks instead of on the
+/// validation years, whose last training day is `train_end`: from its onset on when that is
+/// after the training years ([`Candidate::onset_day`]); its days when it is an episode that comes
+/// back within them ([`Candidate::episode_days`]); `None` otherwise.
+fn keep_window(added: &Candidate, train_end: f64) -> Option<(f64, f64)> {
+    if let Some(onset) = added.onset_day().filter(|&d| d > train_end) {
+        return Some((onset, f64::INFINITY));
+    }
+    added.episode_days().filter(|&(_, last)| last <= train_end)
+}
+
+/// The keep rule's figures for the last of `effects`, acting from day `window.0` to day
+/// `window.1` ([`keep_window`]), when there are two blocks in that window; `None` otherwise. B
+/// without and with it is trained on each of the two folds ([`window_folds`]) and scored on the
+/// fold's held-out days of the window (elsewhere the two differ only by training); the figures
+/// are the means over those days of both folds.
 fn judge_interleaved<P: Problem + ?Sized>(
     problem: &P,
     effects: &[OwnedEffect],
-    onset: Option<f64>,
+    window: Option<(f64, f64)>,
     opts: &LoopOptions,
 ) -> Result<Option<Interleaved>> {
-    let (Some((added, before)), Some(onset)) = (effects.split_last(), onset) else {
+    let (Some((added, before)), Some((first, last))) = (effects.split_last(), window) else {
         return Ok(None);
     };
-    if last_day(&problem.data().train) >= onset {
+    let Some(folds) = window_folds(problem.data(), KEEP_BLOCK_ROWS, first, last) else {
         return Ok(None);
-    }
-    let Some(folds) = onset_folds(problem.data(), KEEP_BLOCK_ROWS, onset) else {
-        return Ok(None);
+    };
+    let episode = last.is_finite();
+    let when = if episode {
+        "comes back within the training years"
+    } else {
+        "starts after the training years"
     };
     eprintln!(
-        "{} starts after the training years: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
+        "{} {when}: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
         added.family()
     );
     let (mut sums, mut days) = ([0.0; 2], 0);
     for data in &folds {
-        let scored = data.valid.since(onset);
+        let scored = data.valid.within(first, last);
         for (sum, effects) in sums.iter_mut().zip([before, effects]) {
             let (m, _) =
                 train_model_on(problem, data, ModelKind::B, effects, &opts.train, opts.seed)?;
@@ -334,6 +359,7 @@ fn judge_interleaved<P: Problem + ?Sized>(
         block: KEEP_BLOCK_ROWS,
         days,
         valid: [sums[0] / n, sums[1] / n],
+        episode,
     }))
 }
 
@@ -384,12 +410,17 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         models.push(bbytes);
         let last = rounds.len() - 1;
         if let Some(before) = previous_valid {
-            let onset = rounds[last].added.as_ref().and_then(Candidate::onset_day);
-            let judged = judge_interleaved(problem, &effects, onset, opts)?;
+            let train_end = last_day(&problem.data().train);
+            let window = rounds[last]
+                .added
+                .as_ref()
+                .and_then(|a| keep_window(a, train_end));
+            let judged = judge_interleaved(problem, &effects, window, opts)?;
             let valid = judged
                 .as_ref()
                 .map_or([before, rounds[last].b.mse[1]], |j| j.valid);
             let interleaved = judged.is_some();
+            let episode = judged.as_ref().is_some_and(|j| j.episode);
             rounds[last].interleaved = judged;
             if valid[1] >= valid[0] {
                 let family = effects.pop().map_or("?".into(), |e| e.family().to_string());
@@ -398,6 +429,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                     family,
                     valid,
                     interleaved,
+                    episode,
                 };
             }
         }
@@ -493,9 +525,14 @@ mod tests {
             baseline: false,
             analysis: AnalysisOptions::default(),
         };
+        let train_end = last_day(&data.train);
         let judge = |effects: &[OwnedEffect]| {
-            let onset = effects.last().and_then(OwnedEffect::onset_day);
-            judge_interleaved(&s.problem, effects, onset, &opts).unwrap()
+            let window = effects
+                .last()
+                .and_then(OwnedEffect::onset_day)
+                .filter(|&d| d > train_end)
+                .map(|d| (d, f64::INFINITY));
+            judge_interleaved(&s.problem, effects, window, &opts).unwrap()
         };
         let after = last_day(&data.train) + 30.0;
         let j = judge(&[OwnedEffect::CommonMode, step(after)]).expect("judged on blocks");
@@ -505,6 +542,7 @@ mod tests {
         let after_onset = data.valid.since(after).len();
         assert!(after_onset > 2 * KEEP_BLOCK_ROWS);
         assert_eq!(j.days, after_onset, "{j:?}");
+        assert!(!j.episode);
         // Within the training years, without an onset, or after every row: the plain rule.
         assert!(judge(&[step(last_day(&data.train) - 30.0)]).is_none());
         assert!(judge(&[OwnedEffect::CommonMode]).is_none());
@@ -514,10 +552,57 @@ mod tests {
             y_km: -1.0,
             depth_km: 4.0,
         };
-        assert!(judge_interleaved(&s.problem, &[source], Some(after), &opts)
+        let from = |d: f64| Some((d, f64::INFINITY));
+        assert!(judge_interleaved(
+            &s.problem,
+            std::slice::from_ref(&source),
+            from(after),
+            &opts
+        )
+        .unwrap()
+        .is_some());
+        // A pulse within the training years: judged over its days, each held out once.
+        let (first, last) = (train_end - 400.0, train_end - 100.0);
+        let j = judge_interleaved(&s.problem, &[source], Some((first, last)), &opts)
             .unwrap()
-            .is_some());
+            .expect("judged on blocks");
+        assert!(j.episode && j.valid.iter().all(|v| v.is_finite() && *v > 0.0));
+        assert_eq!(j.days, data.train.within(first, last).len(), "{j:?}");
         assert!(judge(&[step(last_day(&data.valid) + 1.0)]).is_none());
+    }
+
+    #[test]
+    fn the_keep_window_is_the_onset_after_training_or_an_episode_within_it() {
+        let cand = |params: serde_json::Value| {
+            Candidate::from_scores("second_source", 0.02, vec![0.0; 4], 0.95, params, None)
+        };
+        let end = crate::data::day_number("2018-12-31");
+        let day = crate::data::day_number;
+        let source = |shape: &str, start: &str, last: &str| {
+            cand(serde_json::json!({"shape": shape, "start": start, "end": last}))
+        };
+        // A pulse within the training years: its days.
+        assert_eq!(
+            keep_window(&source("pulse", "2018-03-01", "2018-10-01"), end),
+            Some((day("2018-03-01"), day("2018-10-01")))
+        );
+        // Beginning after them: from its start on, whatever its shape.
+        for shape in ["pulse", "lasting"] {
+            assert_eq!(
+                keep_window(&source(shape, "2019-03-01", "2019-10-01"), end),
+                Some((day("2019-03-01"), f64::INFINITY))
+            );
+        }
+        // A lasting change within them, or a pulse reaching past them: the validation years.
+        assert_eq!(
+            keep_window(&source("lasting", "2018-03-01", "2018-10-01"), end),
+            None
+        );
+        assert_eq!(
+            keep_window(&source("pulse", "2018-09-01", "2019-02-01"), end),
+            None
+        );
+        assert_eq!(keep_window(&cand(serde_json::json!({})), end), None);
     }
 
     #[test]

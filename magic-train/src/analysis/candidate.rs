@@ -184,6 +184,30 @@ impl Candidate {
             })
     }
 
+    /// The first and last day (days since 1970-01-01) of the fitted effect, for an episode that
+    /// comes back (`shape` `pulse`: a source's volume that rises and returns, found active from
+    /// `start` to `end`); `None` for an effect that stays once begun or acts on every row.
+    ///
+    /// ```
+    /// use magic_train::analysis::Candidate;
+    /// let c = |params| Candidate::from_scores("second_source", 0.02, vec![0.0; 4], 0.95, params, None);
+    /// let pulse = c(serde_json::json!({"shape": "pulse", "start": "2018-01-01", "end": "2018-06-30"}));
+    /// assert_eq!(pulse.episode_days(), Some((17532.0, 17712.0)));
+    /// let lasting = c(serde_json::json!({"shape": "lasting", "start": "2018-01-01", "end": "2018-06-30"}));
+    /// assert_eq!(lasting.episode_days(), None);
+    /// ```
+    pub fn episode_days(&self) -> Option<(f64, f64)> {
+        if self.params.get("shape")?.as_str()? != "pulse" {
+            return None;
+        }
+        let day = |k: &str| {
+            let d = crate::data::day_number(self.params.get(k)?.as_str()?);
+            d.is_finite().then_some(d)
+        };
+        let (first, last) = (day("start")?, day("end")?);
+        (first <= last).then_some((first, last))
+    }
+
     /// A candidate read back from a report (its serde form, as `magic loop`'s `report.json`
     /// writes it): family, scores, verdict, parameters and effect; the surrogates' scores, the
     /// statistic, the rejection and the standard deviations are not read back. A number written

@@ -111,9 +111,15 @@ impl Split {
 
     /// The rows dated on or after `day` (days since 1970-01-01), in order; none without dates.
     pub fn since(&self, day: f64) -> Split {
+        self.within(day, f64::INFINITY)
+    }
+
+    /// The rows dated from `first` to `last` (days since 1970-01-01, both included), in order;
+    /// none without dates.
+    pub fn within(&self, first: f64, last: f64) -> Split {
         let days = self.days();
         let keep: Vec<usize> = (0..self.len())
-            .filter(|&i| days.get(i).is_some_and(|&d| d >= day))
+            .filter(|&i| days.get(i).is_some_and(|&d| d >= first && d <= last))
             .collect();
         self.pick(&keep)
     }

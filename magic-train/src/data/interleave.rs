@@ -4,7 +4,9 @@
 //! starts after the training years (a step in the validation years) is zero on every training row:
 //! the encoder never learns that F carries it, so the comparison cannot judge it. Dealing the
 //! training and validation rows out again in blocks puts rows after its onset on both sides; two
-//! folds hold out every row after it once, so the judgement rests on all of them.
+//! folds hold out every row after it once, so the judgement rests on all of them. An effect that
+//! acts within the training years only (a pulse that comes back) is the mirror case: the
+//! validation years do not hold it, so folds over its window judge it instead.
 
 use super::{Dataset, Split};
 
@@ -46,6 +48,47 @@ use super::{Dataset, Split};
 /// assert_eq!(a.train.len() + a.valid.len(), 12);
 /// ```
 pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset; 2]> {
+    window_folds(data, block, onset, f64::INFINITY)
+}
+
+/// The training rows followed by the validation rows, cut into blocks of `block` rows and dealt
+/// out twice, for judging an effect that acts from day `first` to day `last` only (a source's
+/// pulse within the training years, which the validation years do not hold): the blocks holding
+/// a row of that window are held out in turn, the even ones in the first dataset and the odd
+/// ones in the second, so that every row of the window is held out once; the other blocks hold
+/// out the validation share (as in `data`), spread evenly. [`onset_folds`] is the window that
+/// never ends. `None` without dates on every row or with fewer than two blocks in the window.
+///
+/// ```
+/// use magic_train::data::{window_folds, Dataset, Split};
+/// let days = |from: i64, n: i64| Split {
+///     x: (from..from + n).map(|d| vec![d as f32]).collect(),
+///     dates: (from..from + n)
+///         .map(|d| {
+///             let (y, m, dd) = magic_core::time::civil_from_days(d);
+///             format!("{y:04}-{m:02}-{dd:02}")
+///         })
+///         .collect(),
+///     ..Split::default()
+/// };
+/// let data = Dataset {
+///     columns: vec!["day".into()],
+///     mean: vec![0.0],
+///     scale: vec![1.0],
+///     train: days(0, 12),
+///     valid: days(12, 4),
+///     test: Split::default(),
+///     source: "sixteen days".into(),
+/// };
+/// // blocks of two days; days 5 to 8 lie in the third to fifth blocks
+/// let [a, b] = window_folds(&data, 2, 5.0, 8.0).unwrap();
+/// let held = |d: &Dataset| d.valid.x.iter().map(|r| r[0] as i64).collect::<Vec<_>>();
+/// // outside it, one block in four (as in `data`): the last of the five
+/// assert_eq!(held(&a), vec![4, 5, 8, 9, 14, 15]);
+/// assert_eq!(held(&b), vec![6, 7, 14, 15]);
+/// assert_eq!(a.train.len() + a.valid.len(), 16);
+/// ```
+pub fn window_folds(data: &Dataset, block: usize, first: f64, last: f64) -> Option<[Dataset; 2]> {
     let mut all = data.train.clone();
     all.append(&data.valid);
     let block = block.max(1);
@@ -55,20 +98,25 @@ pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset;
         return None;
     }
     let blocks = total.div_ceil(block);
-    // The onset's block: the one holding the first row on or after it.
-    let first = days.iter().position(|&d| d >= onset)? / block;
-    if blocks - first < 2 {
+    // The window's blocks: from the one holding its first row to the one holding its last.
+    let from = days.iter().position(|&d| d >= first)? / block;
+    let to = days.iter().rposition(|&d| d <= last)? / block;
+    if to < from + 1 {
         return None;
     }
+    let inside = |k: usize| (from..=to).contains(&k);
+    let outside = blocks - (to - from + 1);
     let share = data.valid.len() as f64 / total as f64;
-    let before = ((first as f64 * share).round() as usize).min(first.saturating_sub(1));
+    let held_out = ((outside as f64 * share).round() as usize).min(outside.saturating_sub(1));
     let fold = |f: usize| {
         let (mut train, mut valid) = (Split::default(), Split::default());
+        let mut j = 0; // index among the blocks outside the window
         for k in 0..blocks {
-            let held = if k < first {
-                (k + 1) * before / first > k * before / first
+            let held = if inside(k) {
+                (k - from) % 2 == f
             } else {
-                (k - first) % 2 == f
+                j += 1;
+                j * held_out / outside > (j - 1) * held_out / outside
             };
             let rows = all.rows(k * block, (k + 1) * block);
             if held {
@@ -81,7 +129,7 @@ pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset;
             train,
             valid,
             source: format!(
-                "{} (training and validation rows in blocks of {block}, fold {} of 2 from the onset on)",
+                "{} (training and validation rows in blocks of {block}, fold {} of 2 over the effect's days)",
                 data.source,
                 f + 1
             ),
@@ -145,6 +193,42 @@ mod tests {
             folds[0].valid.dates[0], d.train.dates[240],
             "the fifth block"
         );
+    }
+
+    #[test]
+    fn every_row_of_a_window_is_held_out_once() {
+        let d = data(1900, 500);
+        let (first, last) = (d.train.days()[700], d.train.days()[1000]);
+        let folds = window_folds(&d, 60, first, last).unwrap();
+        let mut held_inside = 0;
+        for f in &folds {
+            assert_eq!(f.train.len() + f.valid.len(), 2400);
+            assert_eq!(f.test.len(), 3);
+            assert!(
+                !f.train.within(first, last).is_empty(),
+                "rows of the window train"
+            );
+            held_inside += f.valid.within(first, last).len();
+        }
+        assert_eq!(held_inside, 301);
+        // Blocks 11 to 16 hold the window; of the other 34, the validation share: 7.
+        let inside = 6 * 60;
+        for f in &folds {
+            let window_blocks = f.valid.within(d.train.days()[660], d.train.days()[1019]);
+            assert_eq!(window_blocks.len(), inside / 2);
+            assert_eq!(f.valid.len() - window_blocks.len(), 7 * 60);
+        }
+        // Without an end it is the onset's folds.
+        let onset = d.valid.days()[100];
+        let (a, b) = (
+            window_folds(&d, 60, onset, f64::INFINITY).unwrap(),
+            onset_folds(&d, 60, onset).unwrap(),
+        );
+        assert_eq!(a[0].valid.dates, b[0].valid.dates);
+        assert_eq!(a[1].valid.dates, b[1].valid.dates);
+        // A window within one block, or outside the rows, gives none.
+        assert!(window_folds(&d, 60, first, first + 10.0).is_none());
+        assert!(window_folds(&d, 60, 0.0, 100.0).is_none());
     }
 
     #[test]

@@ -7,7 +7,7 @@ pub mod records;
 pub mod table;
 
 pub use dataset::{day_number, Dataset, Split, SplitName};
-pub use interleave::onset_folds;
+pub use interleave::{onset_folds, window_folds};
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};

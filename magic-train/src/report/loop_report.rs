@@ -118,9 +118,20 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
     );
     for r in &l.rounds {
         if let Some(j) = &r.interleaved {
+            let (what, days) = if j.episode {
+                (
+                    "comes back within the training years, so the validation years cannot judge it",
+                    "of the episode",
+                )
+            } else {
+                (
+                    "starts after the training years, so retraining on them cannot learn it",
+                    "from its onset on",
+                )
+            };
             let _ = writeln!(
                 md,
-                "\nRound {}'s effect starts after the training years, so retraining on them cannot learn it: the keep rule compared B without and with it, both trained on blocks of {} rows of the training and validation years dealt out again in two folds that hold out each of the {} days from its onset on once (validation MSE on them: {:.4} → {:.4}).",
+                "\nRound {}'s effect {what}: the keep rule compared B without and with it, both trained on blocks of {} rows of the training and validation years dealt out again in two folds that hold out each of the {} days {days} once (validation MSE on them: {:.4} → {:.4}).",
                 r.round, j.block, j.days, j.valid[0], j.valid[1]
             );
         }

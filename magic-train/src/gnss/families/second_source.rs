@@ -521,9 +521,10 @@ impl Family<GnssResiduals> for SecondSource {
             rng,
         ))
     }
-    /// Position, and from the daily volume change of the source (30-day running mean, relative
-    /// to its median) the peak and the window around it where the change stays beyond twice its
-    /// robust spread (and 5 % of the peak).
+    /// Position, shape (`pulse`: a change that comes back, as `magic synth` names it), and from
+    /// the daily volume change of the source (30-day running mean, relative to its median) the
+    /// peak and the window around it where the change stays beyond twice its robust spread (and
+    /// 5 % of the peak).
     fn params(&self, res: &GnssResiduals, fit: &SourceFit) -> serde_json::Value {
         let res = res.locating();
         let g = pattern(res, fit.pos);
@@ -567,7 +568,7 @@ impl Family<GnssResiduals> for SecondSource {
         };
         json!({
             "x_km": round3(fit.pos[0]), "y_km": round3(fit.pos[1]), "depth_km": round3(fit.pos[2]),
-            "start": date(a), "end": date(b),
+            "shape": "pulse", "start": date(a), "end": date(b),
             "peak_dv_1e6m3": (peak * 1e4).round() / 1e4,
             "neighbour_days": fit.window,
             "station_share": round3(station_share(res, fit.pos).1),
