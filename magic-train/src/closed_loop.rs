@@ -11,10 +11,10 @@
 //! source's change in the validation years) is one retraining on those years cannot learn: a
 //! step's term is zero on every training row, a source's volume never moves there. It is judged
 //! by B without and with it trained on interleaved blocks of the training and validation rows,
-//! in two folds that hold out every day from its onset on once ([`onset_folds`]), and scored on
-//! those days. An effect that comes back within the training years (a source's pulse) is the
-//! mirror case, one the validation years do not hold: judged the same way over its days
-//! ([`window_folds`]). The loop ends with a [`StopReason`] the report prints. Effects
+//! in two folds that hold out every day from its onset on once
+//! ([`onset_folds`](crate::data::onset_folds)), and scored on those days. An effect that comes
+//! back within the training years (a source's pulse) is the mirror case, one the validation
+//! years do not hold: judged the same way over its days ([`window_folds`]). The loop ends with a [`StopReason`] the report prints. Effects
 //! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
 //! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
 //! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
