@@ -14,11 +14,12 @@
 //! in two folds that hold out every day from its onset on once
 //! ([`onset_folds`](crate::data::onset_folds)), and scored on those days. An effect that comes
 //! back within the training years (a source's pulse) is the mirror case, one the validation
-//! years do not hold: judged the same way over its days ([`window_folds`]). The loop ends with a [`StopReason`] the report prints. Effects
-//! the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did not add
-//! are then tried on top of the last F kept. Every round is scored the same way: train/valid/test
-//! MSE of B and C, physics-only errors, the size of C's correction, the problem's metrics and,
-//! where the problem has one, a classical baseline with the same declared effects.
+//! years do not hold: judged the same way over its days ([`window_folds`]). The loop ends with a
+//! [`StopReason`] the report prints. Effects the problem names for a direct test
+//! ([`Problem::direct_tests`]) and that the loop did not add are then tried on top of the last F
+//! kept. Every round is scored the same way: train/valid/test MSE of B and C, physics-only
+//! errors, the size of C's correction, the problem's metrics and, where the problem has one, a
+//! classical baseline with the same declared effects.
 
 use crate::analysis::{analyse, AnalysisOptions, Candidate};
 use crate::data::{window_folds, Split};
@@ -378,6 +379,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
     let mut rounds: Vec<Round> = Vec::new();
     let mut added: Option<Candidate> = None;
     let mut models: Vec<Vec<u8>> = Vec::new();
+    let train_end = last_day(&problem.data().train);
     let stop = loop {
         let round = rounds.len();
         eprintln!("round {round}: F = {}", describe_f(problem, &effects));
@@ -410,7 +412,6 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
         models.push(bbytes);
         let last = rounds.len() - 1;
         if let Some(before) = previous_valid {
-            let train_end = last_day(&problem.data().train);
             let window = rounds[last]
                 .added
                 .as_ref()

@@ -466,7 +466,8 @@ impl Family<GnssResiduals> for LastingSource {
         };
         json!({
             "x_km": round3(fit.pos[0]), "y_km": round3(fit.pos[1]), "depth_km": round3(fit.pos[2]),
-            "shape": "lasting", "onset": date(fit.onset.min(dv.len())), "start": date(begun), "end": date(done),
+            "shape": "lasting", "onset": date(fit.onset.min(dv.len())),
+            "start": date(begun), "end": date(done),
             "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
             "station_share": round3(station_share(res.locating(), fit.pos).1),
         })
