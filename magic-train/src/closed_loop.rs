@@ -14,7 +14,9 @@
 //! in two folds that hold out every day from its onset on once
 //! ([`onset_folds`](crate::data::onset_folds)), and scored on those days. An effect that comes
 //! back within the training years (a source's pulse) is the mirror case, one the validation
-//! years do not hold: judged the same way over its days ([`window_folds`]). The loop ends with a
+//! years do not hold: judged the same way over its days ([`window_folds`]); a pulse within the
+//! test years, which precede them, too, with the test rows dealt out beside the others (the
+//! analysis found it on them already). The loop ends with a
 //! [`StopReason`] the report prints. Effects the problem names for a direct test
 //! ([`Problem::direct_tests`]) and that the loop did not add are then tried on top of the last F
 //! kept. Every round is scored the same way: train/valid/test MSE of B and C, physics-only
@@ -85,7 +87,7 @@ pub struct Round {
     /// Whether this round's F was kept (false when its added effect was taken out again).
     pub kept: bool,
     /// How the keep rule judged the added effect when it starts after the training years or
-    /// comes back within them.
+    /// comes back before the validation years.
     pub interleaved: Option<Interleaved>,
 }
 
@@ -93,8 +95,8 @@ pub struct Round {
 /// months of daily rows, a whole number of the GNSS recipe's 5-day sequences.
 pub const KEEP_BLOCK_ROWS: usize = 60;
 
-/// The keep rule for an effect that starts after the training years or comes back within
-/// them: B's validation MSE without and with it, both trained on the same interleaved blocks
+/// The keep rule for an effect that starts after the training years or comes back before the
+/// validation years: B's validation MSE without and with it, both trained on the same interleaved blocks
 /// ([`window_folds`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct Interleaved {
@@ -107,9 +109,12 @@ pub struct Interleaved {
     /// How many held-out days that is (every day from the onset on in the training and
     /// validation years, or every day of the episode).
     pub days: usize,
-    /// Whether the effect is an episode within the training years (judged over its days) rather
-    /// than one that starts after them (judged from its onset on).
+    /// Whether the effect is an episode before the validation years (judged over its days)
+    /// rather than one that starts after the training years (judged from its onset on).
     pub episode: bool,
+    /// Whether the test rows were dealt out too: an episode within the test years, which no
+    /// training or validation row holds.
+    pub test_rows: bool,
 }
 
 /// Why the loop stopped.
@@ -136,9 +141,9 @@ pub enum StopReason {
         /// B's validation MSE before and after adding it.
         valid: [f64; 2],
         /// Whether they come from interleaved blocks (the effect starts after the training
-        /// years, or comes back within them).
+        /// years, or comes back before the validation years).
         interleaved: bool,
-        /// Whether the effect comes back within the training years (judged over its days).
+        /// Whether the effect comes back before the validation years (judged over its days).
         episode: bool,
     },
     /// The round limit was reached.
@@ -189,7 +194,7 @@ impl std::fmt::Display for StopReason {
                 let on = match (*interleaved, *episode) {
                     (false, _) => "",
                     (true, false) => " on interleaved blocks of the training and validation years, as it starts after the training years",
-                    (true, true) => " on interleaved blocks of the training and validation years over its days, as it comes back within the training years",
+                    (true, true) => " on interleaved blocks over its days, as it comes back before the validation years",
                 };
                 write!(
                     f,
@@ -309,7 +314,8 @@ fn last_day(s: &Split) -> f64 {
 /// The days over which the keep rule judges `added` on interleaved blocks instead of on the
 /// validation years, whose last training day is `train_end`: from its onset on when that is
 /// after the training years ([`Candidate::onset_day`]); its days when it is an episode that comes
-/// back within them ([`Candidate::episode_days`]); `None` otherwise.
+/// back by their end, within them or within the test years before them
+/// ([`Candidate::episode_days`]); `None` otherwise.
 fn keep_window(added: &Candidate, train_end: f64) -> Option<(f64, f64)> {
     if let Some(onset) = added.onset_day().filter(|&d| d > train_end) {
         return Some((onset, f64::INFINITY));
@@ -335,10 +341,13 @@ fn judge_interleaved<P: Problem + ?Sized>(
         return Ok(None);
     };
     let episode = last.is_finite();
-    let when = if episode {
-        "comes back within the training years"
-    } else {
-        "starts after the training years"
+    let data = problem.data();
+    let test_rows =
+        folds[0].train.len() + folds[0].valid.len() > data.train.len() + data.valid.len();
+    let when = match (episode, test_rows) {
+        (false, _) => "starts after the training years",
+        (true, false) => "comes back within the training years",
+        (true, true) => "comes back within the test years",
     };
     eprintln!(
         "{} {when}: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
@@ -361,6 +370,7 @@ fn judge_interleaved<P: Problem + ?Sized>(
         days,
         valid: [sums[0] / n, sums[1] / n],
         episode,
+        test_rows,
     }))
 }
 
@@ -564,11 +574,24 @@ mod tests {
         .is_some());
         // A pulse within the training years: judged over its days, each held out once.
         let (first, last) = (train_end - 400.0, train_end - 100.0);
+        let j = judge_interleaved(
+            &s.problem,
+            std::slice::from_ref(&source),
+            Some((first, last)),
+            &opts,
+        )
+        .unwrap()
+        .expect("judged on blocks");
+        assert!(j.episode && !j.test_rows && j.valid.iter().all(|v| v.is_finite() && *v > 0.0));
+        assert_eq!(j.days, data.train.within(first, last).len(), "{j:?}");
+        // A pulse within the test years, before the training years: their rows dealt out too.
+        let test = data.test.days();
+        let (first, last) = (test[100], test[400]);
         let j = judge_interleaved(&s.problem, &[source], Some((first, last)), &opts)
             .unwrap()
             .expect("judged on blocks");
-        assert!(j.episode && j.valid.iter().all(|v| v.is_finite() && *v > 0.0));
-        assert_eq!(j.days, data.train.within(first, last).len(), "{j:?}");
+        assert!(j.episode && j.test_rows, "{j:?}");
+        assert_eq!(j.days, data.test.within(first, last).len(), "{j:?}");
         assert!(judge(&[step(last_day(&data.valid) + 1.0)]).is_none());
     }
 
@@ -582,11 +605,13 @@ mod tests {
         let source = |shape: &str, start: &str, last: &str| {
             cand(serde_json::json!({"shape": shape, "start": start, "end": last}))
         };
-        // A pulse within the training years: its days.
-        assert_eq!(
-            keep_window(&source("pulse", "2018-03-01", "2018-10-01"), end),
-            Some((day("2018-03-01"), day("2018-10-01")))
-        );
+        // A pulse within the training years, or within the test years before them: its days.
+        for (start, last) in [("2018-03-01", "2018-10-01"), ("2007-03-01", "2007-10-01")] {
+            assert_eq!(
+                keep_window(&source("pulse", start, last), end),
+                Some((day(start), day(last)))
+            );
+        }
         // Beginning after them: from its start on, whatever its shape.
         for shape in ["pulse", "lasting"] {
             assert_eq!(

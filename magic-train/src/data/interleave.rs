@@ -6,7 +6,8 @@
 //! training and validation rows out again in blocks puts rows after its onset on both sides; two
 //! folds hold out every row after it once, so the judgement rests on all of them. An effect that
 //! acts within the training years only (a pulse that comes back) is the mirror case: the
-//! validation years do not hold it, so folds over its window judge it instead.
+//! validation years do not hold it, so folds over its window judge it instead; a pulse within
+//! the test years, before them, the same way, with the test rows dealt out too.
 
 use super::{Dataset, Split};
 
@@ -56,8 +57,12 @@ pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset;
 /// pulse within the training years, which the validation years do not hold): the blocks holding
 /// a row of that window are held out in turn, the even ones in the first dataset and the odd
 /// ones in the second, so that every row of the window is held out once; the other blocks hold
-/// out the validation share (as in `data`), spread evenly. [`onset_folds`] is the window that
-/// never ends. `None` without dates on every row or with fewer than two blocks in the window.
+/// out the validation share (as in `data`), spread evenly. A window holding no training or
+/// validation row (a pulse within the test years, which precede the training years in the
+/// volcano's layouts) deals the test rows out with them, so that its own days judge it; the
+/// dealt-out datasets keep the test split as it is all the same. [`onset_folds`] is the window
+/// that never ends. `None` without dates on every row or with fewer than two blocks in the
+/// window.
 ///
 /// ```
 /// use magic_train::data::{window_folds, Dataset, Split};
@@ -89,14 +94,10 @@ pub fn onset_folds(data: &Dataset, block: usize, onset: f64) -> Option<[Dataset;
 /// assert_eq!(a.train.len() + a.valid.len(), 16);
 /// ```
 pub fn window_folds(data: &Dataset, block: usize, first: f64, last: f64) -> Option<[Dataset; 2]> {
-    let mut all = data.train.clone();
-    all.append(&data.valid);
+    let all = dealt_rows(data, first, last)?;
     let block = block.max(1);
     let total = all.len();
     let days = all.days();
-    if days.len() != total || days.iter().any(|d| !d.is_finite()) {
-        return None;
-    }
     let blocks = total.div_ceil(block);
     // The window's blocks: from the one holding its first row to the one holding its last.
     let from = days.iter().position(|&d| d >= first)? / block;
@@ -104,6 +105,11 @@ pub fn window_folds(data: &Dataset, block: usize, first: f64, last: f64) -> Opti
     if to < from + 1 {
         return None;
     }
+    let dealt = if total > data.train.len() + data.valid.len() {
+        "test, training and validation"
+    } else {
+        "training and validation"
+    };
     let inside = |k: usize| (from..=to).contains(&k);
     let outside = blocks - (to - from + 1);
     let share = data.valid.len() as f64 / total as f64;
@@ -129,7 +135,7 @@ pub fn window_folds(data: &Dataset, block: usize, first: f64, last: f64) -> Opti
             train,
             valid,
             source: format!(
-                "{} (training and validation rows in blocks of {block}, fold {} of 2 over the effect's days)",
+                "{} ({dealt} rows in blocks of {block}, fold {} of 2 over the effect's days)",
                 data.source,
                 f + 1
             ),
@@ -137,6 +143,45 @@ pub fn window_folds(data: &Dataset, block: usize, first: f64, last: f64) -> Opti
         }
     };
     Some([fold(0), fold(1)])
+}
+
+/// The rows [`window_folds`] deals out, in date order: the training rows followed by the
+/// validation rows; when none of them lies in the window from `first` to `last` (an episode
+/// within the test years), the test rows too, before or after them as their dates fall, so that
+/// the effect's own days can be held out. `None` without dates on every row, or with test rows
+/// that do not all precede or all follow the others.
+fn dealt_rows(data: &Dataset, first: f64, last: f64) -> Option<Split> {
+    let dated = |s: &Split| {
+        let days = s.days();
+        (days.len() == s.len() && days.iter().all(|d| d.is_finite())).then_some(days)
+    };
+    let mut all = data.train.clone();
+    all.append(&data.valid);
+    let days = dated(&all)?;
+    if data.test.is_empty() || days.iter().any(|&d| d >= first && d <= last) {
+        return Some(all);
+    }
+    let test = dated(&data.test)?;
+    if !test.iter().any(|&d| d >= first && d <= last) {
+        return Some(all);
+    }
+    let lo_hi = |d: &[f64]| {
+        d.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            })
+    };
+    let ((t0, t1), (a0, a1)) = (lo_hi(&test), lo_hi(&days));
+    if t1 < a0 {
+        let mut rows = data.test.clone();
+        rows.append(&all);
+        Some(rows)
+    } else if t0 > a1 {
+        all.append(&data.test);
+        Some(all)
+    } else {
+        None
+    }
 }
 
 #[cfg(test)]
@@ -229,6 +274,51 @@ mod tests {
         // A window within one block, or outside the rows, gives none.
         assert!(window_folds(&d, 60, first, first + 10.0).is_none());
         assert!(window_folds(&d, 60, 0.0, 100.0).is_none());
+    }
+
+    #[test]
+    fn a_window_within_the_test_years_deals_their_rows_out_too() {
+        // 600 test days before 1900 training and 500 validation days.
+        let mut d = data(1900, 500);
+        d.test = days(600, 14_000 - 600);
+        let (first, last) = (d.test.days()[200], d.test.days()[450]);
+        let folds = window_folds(&d, 60, first, last).unwrap();
+        let mut held_inside = 0;
+        for f in &folds {
+            assert_eq!(f.train.len() + f.valid.len(), 3000);
+            assert_eq!(f.test.len(), 600, "the test split kept as it is");
+            assert!(!f.train.within(first, last).is_empty());
+            held_inside += f.valid.within(first, last).len();
+            assert!(f.source.contains("test, training and validation rows"));
+        }
+        assert_eq!(held_inside, 251);
+        // In date order: the first block is the test years' first.
+        assert_eq!(folds[0].train.dates[0], d.test.dates[0]);
+        // Test rows after the others are dealt out after them.
+        let mut later = data(1900, 500);
+        later.test = days(600, 14_000 + 2400);
+        let (first, last) = (later.test.days()[100], later.test.days()[300]);
+        let [a, b] = window_folds(&later, 60, first, last).unwrap();
+        assert_eq!(
+            a.valid.within(first, last).len() + b.valid.within(first, last).len(),
+            201
+        );
+        // A window reaching into the training years deals out those years only.
+        let (first, last) = (d.test.days()[500], d.train.days()[300]);
+        let [a, _] = window_folds(&d, 60, first, last).unwrap();
+        assert_eq!(a.train.len() + a.valid.len(), 2400);
+        // Test rows among the others cannot be dealt out in date order.
+        let mut among = data(1900, 500);
+        among.test = days(600, 14_000 + 1000);
+        let (first, last) = (among.test.days()[100], among.test.days()[400]);
+        assert!(
+            window_folds(&among, 60, first, last).is_some(),
+            "training rows there"
+        );
+        among.train = days(900, 14_000);
+        among.valid = days(500, 14_000 + 1800);
+        let (first, last) = (14_000.0 + 950.0, 14_000.0 + 1_500.0);
+        assert!(window_folds(&among, 60, first, last).is_none());
     }
 
     #[test]

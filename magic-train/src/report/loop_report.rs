@@ -118,20 +118,28 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
     );
     for r in &l.rounds {
         if let Some(j) = &r.interleaved {
-            let (what, days) = if j.episode {
-                (
+            let (what, days) = match (j.episode, j.test_rows) {
+                (true, false) => (
                     "comes back within the training years, so the validation years cannot judge it",
                     "of the episode",
-                )
-            } else {
-                (
+                ),
+                (true, true) => (
+                    "comes back within the test years, so the validation years cannot judge it",
+                    "of the episode",
+                ),
+                (false, _) => (
                     "starts after the training years, so retraining on them cannot learn it",
                     "from its onset on",
-                )
+                ),
+            };
+            let years = if j.test_rows {
+                "the test, training and validation years"
+            } else {
+                "the training and validation years"
             };
             let _ = writeln!(
                 md,
-                "\nRound {}'s effect {what}: the keep rule compared B without and with it, both trained on blocks of {} rows of the training and validation years dealt out again in two folds that hold out each of the {} days {days} once (validation MSE on them: {:.4} → {:.4}).",
+                "\nRound {}'s effect {what}: the keep rule compared B without and with it, both trained on blocks of {} rows of {years} dealt out again in two folds that hold out each of the {} days {days} once (validation MSE on them: {:.4} → {:.4}).",
                 r.round, j.block, j.days, j.valid[0], j.valid[1]
             );
         }
