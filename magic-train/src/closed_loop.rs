@@ -16,12 +16,12 @@
 //! back within the training years (a source's pulse) is the mirror case, one the validation
 //! years do not hold: judged the same way over its days ([`window_folds`]); a pulse within the
 //! test years, which precede them, too, with the test rows dealt out beside the others (the
-//! analysis found it on them already). The loop ends with a
-//! [`StopReason`] the report prints. Effects the problem names for a direct test
-//! ([`Problem::direct_tests`]) and that the loop did not add are then tried on top of the last F
-//! kept. Every round is scored the same way: train/valid/test MSE of B and C, physics-only
-//! errors, the size of C's correction, the problem's metrics and, where the problem has one, a
-//! classical baseline with the same declared effects.
+//! analysis found it on them already). The loop ends with a [`StopReason`] the report prints.
+//! Effects the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did
+//! not add are then tried on top of the last F kept. Every round is scored the same way:
+//! train/valid/test MSE of B and C, physics-only errors, the size of C's correction, the
+//! problem's metrics and, where the problem has one, a classical baseline with the same declared
+//! effects.
 
 use crate::analysis::{analyse, AnalysisOptions, Candidate};
 use crate::data::{window_folds, Split};
@@ -96,8 +96,8 @@ pub struct Round {
 pub const KEEP_BLOCK_ROWS: usize = 60;
 
 /// The keep rule for an effect that starts after the training years or comes back before the
-/// validation years: B's validation MSE without and with it, both trained on the same interleaved blocks
-/// ([`window_folds`]).
+/// validation years: B's validation MSE without and with it, both trained on the same
+/// interleaved blocks ([`window_folds`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct Interleaved {
     /// Rows per block.
@@ -115,6 +115,23 @@ pub struct Interleaved {
     /// Whether the test rows were dealt out too: an episode within the test years, which no
     /// training or validation row holds.
     pub test_rows: bool,
+}
+
+impl Interleaved {
+    /// When the effect acts, as the report and the loop's progress say it.
+    pub fn when(&self) -> &'static str {
+        when(self.episode, self.test_rows)
+    }
+}
+
+/// When an effect judged on interleaved blocks acts: after the training years (`episode`
+/// false), or within the test years (`test_rows`) or the training years.
+fn when(episode: bool, test_rows: bool) -> &'static str {
+    match (episode, test_rows) {
+        (false, _) => "starts after the training years",
+        (true, false) => "comes back within the training years",
+        (true, true) => "comes back within the test years",
+    }
 }
 
 /// Why the loop stopped.
@@ -344,14 +361,10 @@ fn judge_interleaved<P: Problem + ?Sized>(
     let data = problem.data();
     let test_rows =
         folds[0].train.len() + folds[0].valid.len() > data.train.len() + data.valid.len();
-    let when = match (episode, test_rows) {
-        (false, _) => "starts after the training years",
-        (true, false) => "comes back within the training years",
-        (true, true) => "comes back within the test years",
-    };
     eprintln!(
-        "{} {when}: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
-        added.family()
+        "{} {}: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
+        added.family(),
+        when(episode, test_rows)
     );
     let (mut sums, mut days) = ([0.0; 2], 0);
     for data in &folds {

@@ -118,20 +118,12 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
     );
     for r in &l.rounds {
         if let Some(j) = &r.interleaved {
-            let (what, days) = match (j.episode, j.test_rows) {
-                (true, false) => (
-                    "comes back within the training years, so the validation years cannot judge it",
-                    "of the episode",
-                ),
-                (true, true) => (
-                    "comes back within the test years, so the validation years cannot judge it",
-                    "of the episode",
-                ),
-                (false, _) => (
-                    "starts after the training years, so retraining on them cannot learn it",
-                    "from its onset on",
-                ),
+            let (why, days) = if j.episode {
+                ("the validation years cannot judge it", "of the episode")
+            } else {
+                ("retraining on them cannot learn it", "from its onset on")
             };
+            let what = format!("{}, so {why}", j.when());
             let years = if j.test_rows {
                 "the test, training and validation years"
             } else {
