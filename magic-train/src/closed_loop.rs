@@ -109,28 +109,56 @@ pub struct Interleaved {
     /// How many held-out days that is (every day from the onset on in the training and
     /// validation years, or every day of the episode).
     pub days: usize,
-    /// Whether the effect is an episode before the validation years (judged over its days)
-    /// rather than one that starts after the training years (judged from its onset on).
-    pub episode: bool,
-    /// Whether the test rows were dealt out too: an episode within the test years, which no
-    /// training or validation row holds.
-    pub test_rows: bool,
+    /// When the effect acts, which decides the days it is judged over and the rows dealt out.
+    pub acts: Acting,
 }
 
-impl Interleaved {
-    /// When the effect acts, as the report and the loop's progress say it.
-    pub fn when(&self) -> &'static str {
-        when(self.episode, self.test_rows)
+/// When an effect the keep rule judges on interleaved blocks acts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Acting {
+    /// From an onset after the training years on: judged from its onset on, on the training
+    /// and validation rows.
+    AfterTraining,
+    /// An episode that comes back within the training years, which the validation years do not
+    /// hold: judged over its days, on the training and validation rows.
+    WithinTraining,
+    /// An episode within the test years, which no training or validation row holds: judged over
+    /// its days, the test rows dealt out beside the others.
+    WithinTest,
+}
+
+impl Acting {
+    /// Whether the effect comes back (judged over its days, not from its onset on).
+    pub fn is_episode(self) -> bool {
+        self != Acting::AfterTraining
     }
-}
 
-/// When an effect judged on interleaved blocks acts: after the training years (`episode`
-/// false), or within the test years (`test_rows`) or the training years.
-fn when(episode: bool, test_rows: bool) -> &'static str {
-    match (episode, test_rows) {
-        (false, _) => "starts after the training years",
-        (true, false) => "comes back within the training years",
-        (true, true) => "comes back within the test years",
+    /// When the effect acts, as the report, the stop reason and the loop's progress say it.
+    pub fn when(self) -> &'static str {
+        match self {
+            Acting::AfterTraining => "starts after the training years",
+            Acting::WithinTraining => "comes back within the training years",
+            Acting::WithinTest => "comes back within the test years",
+        }
+    }
+
+    /// The held-out days it is scored on, as the report and the stop reason say them.
+    pub fn days(self) -> &'static str {
+        if self.is_episode() {
+            "of the episode"
+        } else {
+            "from its onset on"
+        }
+    }
+
+    /// The years whose rows are dealt out into the blocks.
+    pub fn years(self) -> &'static str {
+        if self == Acting::WithinTest {
+            "the test, training and validation years"
+        } else {
+            "the training and validation years"
+        }
     }
 }
 
@@ -157,11 +185,9 @@ pub enum StopReason {
         family: String,
         /// B's validation MSE before and after adding it.
         valid: [f64; 2],
-        /// Whether they come from interleaved blocks (the effect starts after the training
-        /// years, or comes back before the validation years).
-        interleaved: bool,
-        /// Whether the effect comes back before the validation years (judged over its days).
-        episode: bool,
+        /// When the effect acts, where B was judged on interleaved blocks rather than on the
+        /// validation years (`None`).
+        interleaved: Option<Acting>,
     },
     /// The round limit was reached.
     RoundLimit {
@@ -206,13 +232,15 @@ impl std::fmt::Display for StopReason {
                 family,
                 valid,
                 interleaved,
-                episode,
             } => {
-                let on = match (*interleaved, *episode) {
-                    (false, _) => "",
-                    (true, false) => " on interleaved blocks of the training and validation years, as it starts after the training years",
-                    (true, true) => " on interleaved blocks over its days, as it comes back before the validation years",
-                };
+                let on = interleaved.map_or(String::new(), |a| {
+                    format!(
+                        " on interleaved blocks of {} (the held-out days {}), as it {}",
+                        a.years(),
+                        a.days(),
+                        a.when()
+                    )
+                });
                 write!(
                     f,
                     "{family} did not lower B's validation MSE{on} ({:.4} → {:.4}) and was taken out of F again",
@@ -357,14 +385,18 @@ fn judge_interleaved<P: Problem + ?Sized>(
     let Some(folds) = window_folds(problem.data(), KEEP_BLOCK_ROWS, first, last) else {
         return Ok(None);
     };
-    let episode = last.is_finite();
     let data = problem.data();
     let test_rows =
         folds[0].train.len() + folds[0].valid.len() > data.train.len() + data.valid.len();
+    let acts = match (last.is_finite(), test_rows) {
+        (false, _) => Acting::AfterTraining,
+        (true, false) => Acting::WithinTraining,
+        (true, true) => Acting::WithinTest,
+    };
     eprintln!(
         "{} {}: B without and with it on two folds of blocks of {KEEP_BLOCK_ROWS} rows",
         added.family(),
-        when(episode, test_rows)
+        acts.when()
     );
     let (mut sums, mut days) = ([0.0; 2], 0);
     for data in &folds {
@@ -382,8 +414,7 @@ fn judge_interleaved<P: Problem + ?Sized>(
         block: KEEP_BLOCK_ROWS,
         days,
         valid: [sums[0] / n, sums[1] / n],
-        episode,
-        test_rows,
+        acts,
     }))
 }
 
@@ -443,8 +474,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
             let valid = judged
                 .as_ref()
                 .map_or([before, rounds[last].b.mse[1]], |j| j.valid);
-            let interleaved = judged.is_some();
-            let episode = judged.as_ref().is_some_and(|j| j.episode);
+            let interleaved = judged.as_ref().map(|j| j.acts);
             rounds[last].interleaved = judged;
             if valid[1] >= valid[0] {
                 let family = effects.pop().map_or("?".into(), |e| e.family().to_string());
@@ -453,7 +483,6 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                     family,
                     valid,
                     interleaved,
-                    episode,
                 };
             }
         }
@@ -566,7 +595,7 @@ mod tests {
         let after_onset = data.valid.since(after).len();
         assert!(after_onset > 2 * KEEP_BLOCK_ROWS);
         assert_eq!(j.days, after_onset, "{j:?}");
-        assert!(!j.episode);
+        assert_eq!(j.acts, Acting::AfterTraining);
         // Within the training years, without an onset, or after every row: the plain rule.
         assert!(judge(&[step(last_day(&data.train) - 30.0)]).is_none());
         assert!(judge(&[OwnedEffect::CommonMode]).is_none());
@@ -595,7 +624,9 @@ mod tests {
         )
         .unwrap()
         .expect("judged on blocks");
-        assert!(j.episode && !j.test_rows && j.valid.iter().all(|v| v.is_finite() && *v > 0.0));
+        assert!(
+            j.acts == Acting::WithinTraining && j.valid.iter().all(|v| v.is_finite() && *v > 0.0)
+        );
         assert_eq!(j.days, data.train.within(first, last).len(), "{j:?}");
         // A pulse within the test years, before the training years: their rows dealt out too.
         let test = data.test.days();
@@ -603,7 +634,7 @@ mod tests {
         let j = judge_interleaved(&s.problem, &[source], Some((first, last)), &opts)
             .unwrap()
             .expect("judged on blocks");
-        assert!(j.episode && j.test_rows, "{j:?}");
+        assert_eq!(j.acts, Acting::WithinTest, "{j:?}");
         assert_eq!(j.days, data.test.within(first, last).len(), "{j:?}");
         assert!(judge(&[step(last_day(&data.valid) + 1.0)]).is_none());
     }
@@ -642,6 +673,27 @@ mod tests {
             None
         );
         assert_eq!(keep_window(&cand(serde_json::json!({})), end), None);
+    }
+
+    #[test]
+    fn an_effect_taken_out_says_which_days_judged_it() {
+        let stop = |interleaved: Option<Acting>| {
+            StopReason::NoValidationGain {
+                family: "second_source".into(),
+                valid: [0.75, 0.8],
+                interleaved,
+            }
+            .to_string()
+        };
+        assert_eq!(
+            stop(None),
+            "second_source did not lower B's validation MSE (0.7500 → 0.8000) and was taken out of F again"
+        );
+        let after = stop(Some(Acting::AfterTraining));
+        assert!(after.contains("blocks of the training and validation years (the held-out days from its onset on), as it starts after the training years"), "{after}");
+        let test = stop(Some(Acting::WithinTest));
+        assert!(test.contains("blocks of the test, training and validation years (the held-out days of the episode), as it comes back within the test years"), "{test}");
+        assert!(stop(Some(Acting::WithinTraining)).contains("comes back within the training years"));
     }
 
     #[test]

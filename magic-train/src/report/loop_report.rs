@@ -118,17 +118,13 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
     );
     for r in &l.rounds {
         if let Some(j) = &r.interleaved {
-            let (why, days) = if j.episode {
-                ("the validation years cannot judge it", "of the episode")
+            let why = if j.acts.is_episode() {
+                "the validation years cannot judge it"
             } else {
-                ("retraining on them cannot learn it", "from its onset on")
+                "retraining on them cannot learn it"
             };
-            let what = format!("{}, so {why}", j.when());
-            let years = if j.test_rows {
-                "the test, training and validation years"
-            } else {
-                "the training and validation years"
-            };
+            let what = format!("{}, so {why}", j.acts.when());
+            let (years, days) = (j.acts.years(), j.acts.days());
             let _ = writeln!(
                 md,
                 "\nRound {}'s effect {what}: the keep rule compared B without and with it, both trained on blocks of {} rows of {years} dealt out again in two folds that hold out each of the {} days {days} once (validation MSE on them: {:.4} → {:.4}).",
