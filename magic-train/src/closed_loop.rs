@@ -7,7 +7,10 @@
 //! [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
 //! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
 //! significance in the residuals is necessary, not sufficient; an effect that does not is taken
-//! out again and the loop stops. An effect that starts after the training years (a step or a
+//! out again, and the next significant, declarable candidate of the last F kept is tried in its
+//! place ([`Analysis::next_declarable`]; an effect of the validation years F lacks can make a
+//! true one raise B's validation MSE there), each taken out only once while F stays as it is;
+//! the loop stops when none is left or at the round limit, rounds taken out counted. An effect that starts after the training years (a step or a
 //! source's change in the validation years) is one retraining on those years cannot learn: a
 //! step's term is zero on every training row, a source's volume never moves there. It is judged
 //! by B without and with it trained on interleaved blocks of the training and validation rows,
@@ -23,7 +26,7 @@
 //! problem's metrics and, where the problem has one, a classical baseline with the same declared
 //! effects.
 
-use crate::analysis::{analyse, AnalysisOptions, Candidate};
+use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate};
 use crate::data::{window_folds, Split};
 use crate::eval::{evaluate, evaluate_splits};
 use crate::model::OwnedEffect;
@@ -179,7 +182,8 @@ pub enum StopReason {
         /// ([`Analysis::beyond_model_file`](crate::analysis::Analysis::beyond_model_file)).
         full: bool,
     },
-    /// The added effect did not lower B's validation MSE and was taken out again.
+    /// The added effect did not lower B's validation MSE and was taken out again, and no other
+    /// candidate of the last F kept was left to try (or the round limit was reached).
     NoValidationGain {
         /// The family taken out.
         family: String,
@@ -434,6 +438,10 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
     let mut added: Option<Candidate> = None;
     let mut models: Vec<Vec<u8>> = Vec::new();
     let train_end = last_day(&problem.data().train);
+    // The analysis of the last F kept, and the effects taken out against it: the next
+    // candidate is taken from it, none of those again.
+    let mut kept_analysis: Option<Analysis> = None;
+    let mut taken_out: Vec<OwnedEffect> = Vec::new();
     let stop = loop {
         let round = rounds.len();
         eprintln!("round {round}: F = {}", describe_f(problem, &effects));
@@ -451,7 +459,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
             analysis
         };
         eprint!("{}", analysis.table());
-        let previous_valid = rounds.last().map(|r: &Round| r.b.mse[1]);
+        let previous_valid = rounds.iter().rev().find(|r| r.kept).map(|r| r.b.mse[1]);
         rounds.push(Round {
             round,
             effects: effects.iter().map(|e| e.family().to_string()).collect(),
@@ -477,15 +485,30 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
             let interleaved = judged.as_ref().map(|j| j.acts);
             rounds[last].interleaved = judged;
             if valid[1] >= valid[0] {
-                let family = effects.pop().map_or("?".into(), |e| e.family().to_string());
+                let out = effects.pop();
+                let family = out.as_ref().map_or("?".into(), |e| e.family().to_string());
                 rounds[last].kept = false;
-                break StopReason::NoValidationGain {
-                    family,
-                    valid,
-                    interleaved,
+                taken_out.extend(out);
+                // Another candidate of the last F kept, tried in its place: an effect of the
+                // validation years F lacks can make a true one raise B's validation MSE there.
+                let next = kept_analysis
+                    .as_ref()
+                    .filter(|_| round < opts.max_rounds)
+                    .and_then(|a| a.next_declarable(&effects, &taken_out, &opts.analysis));
+                let Some(cand) = next else {
+                    break StopReason::NoValidationGain {
+                        family,
+                        valid,
+                        interleaved,
+                    };
                 };
+                eprintln!("{family} taken out; next: {}", cand.family);
+                effects.extend(cand.effect.clone());
+                added = Some(cand.clone());
+                continue;
             }
         }
+        taken_out.clear();
         if round == opts.max_rounds {
             break StopReason::RoundLimit {
                 rounds: opts.max_rounds,
@@ -514,6 +537,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                 };
             }
         }
+        kept_analysis = Some(analysis);
     };
     let mut direct = Vec::new();
     for e in problem.direct_tests() {

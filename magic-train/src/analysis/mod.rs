@@ -170,10 +170,24 @@ impl Analysis {
         declared: &[OwnedEffect],
         opts: &AnalysisOptions,
     ) -> Option<&Candidate> {
+        self.next_declarable(declared, &[], opts)
+    }
+
+    /// As [`top_declarable`](Self::top_declarable), passing over the candidates whose effect is
+    /// one of `taken_out` ([`OwnedEffect::same_term`]): added to F and taken out again, the loop
+    /// tries the next.
+    pub fn next_declarable(
+        &self,
+        declared: &[OwnedEffect],
+        taken_out: &[OwnedEffect],
+        opts: &AnalysisOptions,
+    ) -> Option<&Candidate> {
         if declared.len() >= magic_core::effects::MAX_EFFECTS {
             return None;
         }
-        let new_term = |e: &OwnedEffect| term(declared, e, opts) == Term::New;
+        let new_term = |e: &OwnedEffect| {
+            term(declared, e, opts) == Term::New && !taken_out.iter().any(|t| t.same_term(e))
+        };
         self.effects
             .iter()
             .find(|c| c.significant && c.effect.as_ref().is_some_and(new_term))
@@ -392,6 +406,41 @@ mod tests {
                 full[1].clone()
             ]),
             None
+        );
+    }
+
+    #[test]
+    fn an_effect_taken_out_is_passed_over_with_its_term() {
+        let source = |x_km: f32| OwnedEffect::SecondSource {
+            x_km,
+            y_km: -2.0,
+            depth_km: 4.0,
+        };
+        let analysis = Analysis {
+            problem: "mogi",
+            splits: vec![],
+            effects: vec![
+                significant("common_mode", 0.3, OwnedEffect::CommonMode),
+                significant("lasting_source", 0.2, source(1.0)),
+                significant("second_source", 0.1, source(1.5)),
+            ],
+            residuals: json!({}),
+            summary: String::new(),
+            seconds: 0.0,
+        };
+        let opts = AnalysisOptions::default();
+        let next = |taken_out: &[OwnedEffect]| {
+            analysis
+                .next_declarable(&[], taken_out, &opts)
+                .map(|c| c.family.as_str())
+        };
+        assert_eq!(next(&[]), Some("common_mode"));
+        assert_eq!(next(&[OwnedEffect::CommonMode]), Some("lasting_source"));
+        // A source taken out is the same term as either family's candidate within 2 km.
+        assert_eq!(next(&[OwnedEffect::CommonMode, source(1.2)]), None);
+        assert_eq!(
+            next(&[OwnedEffect::CommonMode, source(9.0)]),
+            Some("lasting_source")
         );
     }
 
