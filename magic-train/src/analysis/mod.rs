@@ -344,6 +344,18 @@ mod tests {
         c
     }
 
+    /// An analysis holding `effects`, ranked as given.
+    fn analysed(effects: Vec<Candidate>) -> Analysis {
+        Analysis {
+            problem: "mogi",
+            splits: vec![],
+            effects,
+            residuals: json!({}),
+            summary: String::new(),
+            seconds: 0.0,
+        }
+    }
+
     #[test]
     fn a_declared_term_is_not_added_again_but_a_source_elsewhere_is() {
         let source = OwnedEffect::SecondSource {
@@ -351,18 +363,11 @@ mod tests {
             y_km: -2.0,
             depth_km: 4.0,
         };
-        let analysis = Analysis {
-            problem: "mogi",
-            splits: vec![],
-            effects: vec![
-                significant("lasting_source", 0.3, source.clone()),
-                significant("second_source", 0.2, source),
-                significant("common_mode", 0.1, OwnedEffect::CommonMode),
-            ],
-            residuals: json!({}),
-            summary: String::new(),
-            seconds: 0.0,
-        };
+        let analysis = analysed(vec![
+            significant("lasting_source", 0.3, source.clone()),
+            significant("second_source", 0.2, source),
+            significant("common_mode", 0.1, OwnedEffect::CommonMode),
+        ]);
         let two = AnalysisOptions {
             extra_sources: 2,
             ..AnalysisOptions::default()
@@ -416,18 +421,11 @@ mod tests {
             y_km: -2.0,
             depth_km: 4.0,
         };
-        let analysis = Analysis {
-            problem: "mogi",
-            splits: vec![],
-            effects: vec![
-                significant("common_mode", 0.3, OwnedEffect::CommonMode),
-                significant("lasting_source", 0.2, source(1.0)),
-                significant("second_source", 0.1, source(1.5)),
-            ],
-            residuals: json!({}),
-            summary: String::new(),
-            seconds: 0.0,
-        };
+        let analysis = analysed(vec![
+            significant("common_mode", 0.3, OwnedEffect::CommonMode),
+            significant("lasting_source", 0.2, source(1.0)),
+            significant("second_source", 0.1, source(1.5)),
+        ]);
         let opts = AnalysisOptions::default();
         let next = |taken_out: &[OwnedEffect]| {
             analysis
@@ -451,17 +449,10 @@ mod tests {
             epoch_day,
             offset_mm: [2.0, -1.0, 8.0],
         };
-        let analysis = Analysis {
-            problem: "mogi",
-            splits: vec![],
-            effects: vec![
-                significant("step", 0.3, step(4, 15_100.0)),
-                significant("common_mode", 0.1, OwnedEffect::CommonMode),
-            ],
-            residuals: json!({}),
-            summary: String::new(),
-            seconds: 0.0,
-        };
+        let analysis = analysed(vec![
+            significant("step", 0.3, step(4, 15_100.0)),
+            significant("common_mode", 0.1, OwnedEffect::CommonMode),
+        ]);
         let top = |declared: &[OwnedEffect], steps: usize| {
             let opts = AnalysisOptions {
                 steps,
