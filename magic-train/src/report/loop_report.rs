@@ -99,6 +99,36 @@ pub fn rounds_table(l: &LoopReport) -> String {
     markdown_table(&header, &rows)
 }
 
+/// A line per effect taken out before the last round: its validation MSE without and with it,
+/// and that the next candidate of the last F kept was tried in its place.
+fn tried_next(l: &LoopReport) -> String {
+    let mut s = String::new();
+    let mut kept = 0;
+    for (i, r) in l.rounds.iter().enumerate() {
+        if r.kept {
+            kept = i;
+            continue;
+        }
+        let Some(next) = l.rounds.get(i + 1) else {
+            break;
+        };
+        let valid = r
+            .interleaved
+            .as_ref()
+            .map_or([l.rounds[kept].b.mse[1], r.b.mse[1]], |j| j.valid);
+        let family = r.added.as_ref().map_or("?", |a| a.family.as_str());
+        let _ = writeln!(
+            s,
+            "\nRound {}'s {family} did not lower B's validation MSE ({} → {}) and was taken out; round {} tried the next candidate of round {kept}'s analysis in its place.",
+            r.round,
+            f4(valid[0]),
+            f4(valid[1]),
+            next.round
+        );
+    }
+    s
+}
+
 /// Writes `report.md`, `report.json` and `b_test_mse.png` into `dir`; `figures` are Markdown
 /// image lines of the problem's own before/after figures.
 pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
@@ -110,6 +140,7 @@ pub fn write(l: &LoopReport, figures: &[String], dir: &Path) -> Result<()> {
         l.physics
     );
     md.push_str(&rounds_table(l));
+    md.push_str(&tried_next(l));
     let _ = writeln!(
         md,
         "\nThe loop stopped after round {}: {}.",
@@ -202,4 +233,55 @@ fn uncertainty_cell(u: &[crate::analysis::ParamSd]) -> String {
         .map(|p| format!("{} {:.3} ± {:.3}", p.name, p.value, p.sd))
         .collect::<Vec<_>>()
         .join("; ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::Candidate;
+    use crate::closed_loop::{Round, StopReason};
+
+    fn round(i: usize, family: Option<&str>, valid: f64, kept: bool) -> Round {
+        let scores = Scores {
+            mse: [0.5, valid, 0.7],
+            physics: [1.0; 3],
+            correction_ms: 0.0,
+            metrics: vec![],
+            best_epoch: 1,
+        };
+        Round {
+            round: i,
+            effects: vec![],
+            added: family
+                .map(|f| Candidate::from_scores(f, 0.05, vec![0.0; 4], 0.95, json!({}), None)),
+            b: scores.clone(),
+            c: scores,
+            baseline: vec![],
+            candidates: vec![],
+            kept,
+            interleaved: None,
+        }
+    }
+
+    #[test]
+    fn an_effect_taken_out_before_the_last_round_says_what_came_next() {
+        let l = LoopReport {
+            problem: "mogi".into(),
+            physics: "Mogi".into(),
+            data: "test".into(),
+            rounds: vec![
+                round(0, None, 1.6, true),
+                round(1, Some("common_mode"), 1.7, false),
+                round(2, Some("seasonal"), 1.5, true),
+                round(3, Some("step"), 1.55, false),
+            ],
+            stop: StopReason::RoundLimit { rounds: 3 },
+            direct: vec![],
+        };
+        let s = tried_next(&l);
+        assert_eq!(
+            s.trim(),
+            "Round 1's common_mode did not lower B's validation MSE (1.6000 → 1.7000) and was taken out; round 2 tried the next candidate of round 0's analysis in its place."
+        );
+    }
 }
