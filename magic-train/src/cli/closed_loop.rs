@@ -53,7 +53,8 @@ pub struct LoopCmd {
     epochs: usize,
     #[command(flatten)]
     warmup: Warmup,
-    /// Most effects to add.
+    /// Most rounds after the first, each adding one effect (kept, or taken out again and the
+    /// next candidate tried in the following round).
     #[arg(long, default_value_t = 3)]
     rounds: usize,
     /// Skip the classical baseline (volcano: a per-day least-squares fit each round).

@@ -231,7 +231,8 @@ pub struct SynthLoopCmd {
     epochs: usize,
     #[command(flatten)]
     warmup: Warmup,
-    /// Most effects to add.
+    /// Most rounds after the first, each adding one effect (kept, or taken out again and the
+    /// next candidate tried in the following round).
     #[arg(long, default_value_t = 3)]
     rounds: usize,
     /// The volcano's main source in the residual analysis: `free` to move every day (whatever
