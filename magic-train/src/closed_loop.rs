@@ -10,8 +10,9 @@
 //! out again, and the next significant, declarable candidate of the last F kept is tried in its
 //! place ([`Analysis::next_declarable`]; an effect of the validation years F lacks can make a
 //! true one raise B's validation MSE there), each taken out only once while F stays as it is;
-//! the loop stops when none is left or at the round limit, rounds taken out counted. An effect that starts after the training years (a step or a
-//! source's change in the validation years) is one retraining on those years cannot learn: a
+//! the loop stops when none is left or at the round limit, rounds taken out counted. An effect
+//! that starts after the training years (a step or a source's change in the validation years)
+//! is one retraining on those years cannot learn: a
 //! step's term is zero on every training row, a source's volume never moves there. It is judged
 //! by B without and with it trained on interleaved blocks of the training and validation rows,
 //! in two folds that hold out every day from its onset on once
