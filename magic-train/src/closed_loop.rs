@@ -1,31 +1,29 @@
 //! `magic loop`: close the loop between residuals and physics, for every problem.
 //!
-//! Round 0 trains B (encoder + F) and C (+ correction) with the problem's plain F. Each round
-//! then analyses B's residuals ([`crate::analysis`]: every family scored on held-out data against
+//! Round 0 trains B (encoder + F) and C (+ correction) with the problem's plain F. Each round then
+//! analyses B's residuals ([`crate::analysis`]: every family scored on held-out data against
 //! chance), adds the top significant family whose term can be declared in F and is not yet (one
 //! term of each kind, or as many point sources and steps as the options allow:
-//! [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)),
-//! retrains, and repeats. One rule keeps an effect: it must lower B's validation MSE —
-//! significance in the residuals is necessary, not sufficient; an effect that does not is taken
-//! out again, and the next significant, declarable candidate of the last F kept is tried in its
-//! place ([`Analysis::next_declarable`]; an effect of the validation years F lacks can make a
-//! true one raise B's validation MSE there), each taken out only once while F stays as it is;
-//! the loop stops when none is left or at the round limit, rounds taken out counted. An effect
-//! that starts after the training years (a step or a source's change in the validation years)
-//! is one retraining on those years cannot learn: a
-//! step's term is zero on every training row, a source's volume never moves there. It is judged
-//! by B without and with it trained on interleaved blocks of the training and validation rows,
-//! in two folds that hold out every day from its onset on once
-//! ([`onset_folds`](crate::data::onset_folds)), and scored on those days. An effect that comes
-//! back within the training years (a source's pulse) is the mirror case, one the validation
-//! years do not hold: judged the same way over its days ([`window_folds`]); a pulse within the
-//! test years, which precede them, too, with the test rows dealt out beside the others (the
-//! analysis found it on them already). The loop ends with a [`StopReason`] the report prints.
-//! Effects the problem names for a direct test ([`Problem::direct_tests`]) and that the loop did
-//! not add are then tried on top of the last F kept. Every round is scored the same way:
-//! train/valid/test MSE of B and C, physics-only errors, the size of C's correction, the
-//! problem's metrics and, where the problem has one, a classical baseline with the same declared
-//! effects.
+//! [`Analysis::top_declarable`](crate::analysis::Analysis::top_declarable)), retrains, and repeats.
+//! One rule keeps an effect: it must lower B's validation MSE — significance in the residuals is
+//! necessary, not sufficient; an effect that does not is taken out again, and the next significant,
+//! declarable candidate of the last F kept is tried in its place ([`Analysis::next_declarable`]; an
+//! effect of the validation years F lacks can make a true one raise B's validation MSE there), each
+//! taken out only once while F stays as it is; the loop stops when none is left or at the round
+//! limit, rounds taken out counted. An effect that starts after the training years (a step or a
+//! source's change in the validation years) is one retraining on those years cannot learn: a step's
+//! term is zero on every training row, a source's volume never moves there. It is judged by B
+//! without and with it trained on interleaved blocks of the training and validation rows, in two
+//! folds that hold out every day from its onset on once
+//! ([`onset_folds`](crate::data::onset_folds)), and scored on those days. An effect that comes back
+//! within the training years (a source's pulse) is the mirror case, one the validation years do not
+//! hold: judged the same way over its days ([`window_folds`]); a pulse within the test years, which
+//! precede them, too, with the test rows dealt out beside the others (the analysis found it on them
+//! already). The loop ends with a [`StopReason`] the report prints. Effects the problem names for a
+//! direct test ([`Problem::direct_tests`]) and that the loop did not add are then tried on top of
+//! the last F kept. Every round is scored the same way: train/valid/test MSE of B and C,
+//! physics-only errors, the size of C's correction, the problem's metrics and, where the problem
+//! has one, a classical baseline with the same declared effects.
 
 use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate};
 use crate::data::{window_folds, Split};
