@@ -44,7 +44,7 @@ pub struct LoopOptions {
     pub seed: u64,
     /// Training recipe.
     pub train: TrainConfig,
-    /// Most effects added.
+    /// Most rounds after the first, each adding one effect (kept, or taken out again).
     pub max_rounds: usize,
     /// Also run the problem's classical baseline each round.
     pub baseline: bool,
