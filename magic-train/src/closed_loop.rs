@@ -91,6 +91,10 @@ pub struct Round {
     /// How the keep rule judged the added effect when it starts after the training years or
     /// comes back before the validation years.
     pub interleaved: Option<Interleaved>,
+    /// B's validation MSE without and with the added effect as the keep rule compared them (over
+    /// the interleaved blocks' days where [`interleaved`](Self::interleaved) is set); `None` in
+    /// round 0.
+    pub valid: Option<[f64; 2]>,
 }
 
 /// Rows per block when the keep rule deals the training and validation rows out again: two
@@ -469,6 +473,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
             candidates: analysis.effects.clone(),
             kept: true,
             interleaved: None,
+            valid: None,
         });
         models.push(bbytes);
         let last = rounds.len() - 1;
@@ -483,6 +488,7 @@ pub fn run<P: Problem + ?Sized>(problem: &P, opts: &LoopOptions, dir: &Path) -> 
                 .map_or([before, rounds[last].b.mse[1]], |j| j.valid);
             let interleaved = judged.as_ref().map(|j| j.acts);
             rounds[last].interleaved = judged;
+            rounds[last].valid = Some(valid);
             if valid[1] >= valid[0] {
                 let out = effects.pop();
                 let family = out.as_ref().map_or("?".into(), |e| e.family().to_string());

@@ -112,10 +112,9 @@ fn tried_next(l: &LoopReport) -> String {
         let Some(next) = l.rounds.get(i + 1) else {
             break;
         };
-        let valid = r
-            .interleaved
-            .as_ref()
-            .map_or([l.rounds[kept].b.mse[1], r.b.mse[1]], |j| j.valid);
+        let Some(valid) = r.valid else {
+            continue;
+        };
         let family = r.added.as_ref().map_or("?", |a| a.family.as_str());
         let _ = writeln!(
             s,
@@ -241,7 +240,7 @@ mod tests {
     use crate::analysis::Candidate;
     use crate::closed_loop::{Round, StopReason};
 
-    fn round(i: usize, family: Option<&str>, valid: f64, kept: bool) -> Round {
+    fn round(i: usize, family: Option<&str>, valid: f64, kept: bool, before: f64) -> Round {
         let scores = Scores {
             mse: [0.5, valid, 0.7],
             physics: [1.0; 3],
@@ -260,6 +259,7 @@ mod tests {
             candidates: vec![],
             kept,
             interleaved: None,
+            valid: family.map(|_| [before, valid]),
         }
     }
 
@@ -270,10 +270,10 @@ mod tests {
             physics: "Mogi".into(),
             data: "test".into(),
             rounds: vec![
-                round(0, None, 1.6, true),
-                round(1, Some("common_mode"), 1.7, false),
-                round(2, Some("seasonal"), 1.5, true),
-                round(3, Some("step"), 1.55, false),
+                round(0, None, 1.6, true, f64::NAN),
+                round(1, Some("common_mode"), 1.7, false, 1.6),
+                round(2, Some("seasonal"), 1.5, true, 1.6),
+                round(3, Some("step"), 1.55, false, 1.5),
             ],
             stop: StopReason::RoundLimit { rounds: 3 },
             direct: vec![],
