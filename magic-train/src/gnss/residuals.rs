@@ -125,6 +125,9 @@ pub struct Context {
     pub(crate) source_grid: OnceLock<SourceGrid>,
     /// Cached lasting-source search grid (the second source's, reaching shallower).
     pub(crate) lasting_grid: OnceLock<SourceGrid>,
+    /// Cached pulse the lasting source is searched beside, if any (found on the
+    /// data's own residuals; their draws share it).
+    pub(crate) pulse: OnceLock<Option<crate::gnss::families::lasting_source::pulse::Pulse>>,
 }
 
 /// Residuals of a model on a dataset: the analysed days in time order (which surrogates
@@ -520,6 +523,7 @@ fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssR
             splits: shared.splits.to_vec(),
             source_grid: OnceLock::new(),
             lasting_grid: OnceLock::new(),
+            pulse: OnceLock::new(),
         }),
         fit,
         held: None,

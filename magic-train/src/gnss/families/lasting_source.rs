@@ -28,7 +28,9 @@
 //! (trial seeds 101–110: 101 → 102 of 120 found; a grid masked to that region found as many
 //! but lost a held-out one its mask kept the search from starting at).
 //! The network translations are a nuisance in the gain and are removed before the surrogates
-//! randomise each station's series, as for the second source. The scan's value at the fit is
+//! randomise each station's series, as for the second source. A pulse of another source in the
+//! same residuals is taken off over its months before the search and the surrogates
+//! ([`pulse`]): the search took its rise or fall for a change. The scan's value at the fit is
 //! the family's detection statistic: standing out of the surrogates', it makes a score merely
 //! above chance significant, as a step's does; unlike a step's, it never rejects a score beyond
 //! its margin.
@@ -52,6 +54,7 @@ use rayon::prelude::*;
 use serde_json::json;
 
 mod change;
+pub mod pulse;
 use change::Change;
 
 /// Candidates refined in the search.
@@ -276,7 +279,8 @@ fn candidates(
 fn search(res: &GnssResiduals) -> LastingFit {
     let ns = res.ns();
     let loc = res.locating();
-    let d = offsets(&loc.fit.r, res.nc());
+    let r = pulse::taken_off(loc, pulse::beside(res));
+    let d = offsets(&r, res.nc());
     let SourceGrid {
         points: pts,
         patterns,
@@ -291,7 +295,7 @@ fn search(res: &GnssResiduals) -> LastingFit {
         .map(|g| d.iter().map(|(_, de)| shared_offset(g, de, ns)).collect())
         .collect();
     let ts = translations(loc);
-    let pre = Prefix::new(&loc.fit.r, loc.nc());
+    let pre = Prefix::new(&r, loc.nc());
     let gain_of = |g: &[f64], onset: usize| lasting_gain(g, &ts, &pre, ns, onset);
     let gain = |pos: [f64; 3], onset: usize| gain_of(&pattern(loc, pos), onset);
     // Where the field is not mostly a move of the main source.
@@ -334,7 +338,8 @@ fn search(res: &GnssResiduals) -> LastingFit {
 /// not the search's (`magic synth-check`).
 pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> LastingFit {
     let (ns, loc) = (res.ns(), res.locating());
-    let d = offsets(&loc.fit.r, loc.nc());
+    let r = pulse::taken_off(loc, pulse::beside(res));
+    let d = offsets(&r, loc.nc());
     let day = |t: usize| loc.fit.days.get(t).copied().unwrap_or(f64::NAN);
     let mut within: Vec<&(usize, Vec<f64>)> = d
         .iter()
@@ -348,7 +353,7 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
         );
     }
     let (g, ts) = (pattern(loc, pos), translations(loc));
-    let pre = Prefix::new(&loc.fit.r, loc.nc());
+    let pre = Prefix::new(&r, loc.nc());
     let mut best = LastingFit::default();
     for (i, (onset, de)) in within.into_iter().enumerate() {
         let score = lasting_gain(&g, &ts, &pre, ns, *onset);
@@ -373,9 +378,12 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
 /// in the draw. Randomised station by station (as the surrogates' flips would), they lose the
 /// coherence by which the free view projects them off, and swell the chance level; the source's
 /// own fit is left out because the family also scores a statistic on the held view, which must
-/// not find the source in its own surrogates.
+/// not find the source in its own surrogates. The pulse the family is searched beside
+/// ([`pulse::beside`]) is taken off first: randomised station by station, a pulse's months make
+/// changes of the mean at every station by chance.
 fn surrogate_beside_moves(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
-    let drawn = latent::surrogate(res, &with_translations(res, pos), rng);
+    let without = res.with_fit(pulse::taken_off(res, pulse::beside(res)));
+    let drawn = latent::surrogate(&without, &with_translations(res, pos), rng);
     let Some(held) = res.held.as_deref() else {
         return drawn;
     };
@@ -401,15 +409,17 @@ fn resample_change(res: &GnssResiduals, fit: &LastingFit, rng: &mut StdRng) -> G
     let Some(q) = basis.last().filter(|_| basis.len() == cols.len()) else {
         return resample_at(res, fit.pos, rng);
     };
-    // The source's daily amplitude beside the translations (q is its part orthogonal to them).
-    let a = latent::daily_amplitude(&loc.fit.r, nc, q);
+    // The source's daily amplitude beside the translations (q is its part orthogonal to them),
+    // where the family searched: beside the pulse, if any.
+    let r = pulse::taken_off(loc, pulse::beside(res));
+    let a = latent::daily_amplitude(&r, nc, q);
     let change = Change::of(&a, fit.onset);
-    let (mut kept, _) = latent::split_effect(&loc.fit.r, nc, &basis);
+    let (mut kept, _) = latent::split_effect(&r, nc, &basis);
     for (t, (row, at)) in kept.chunks_mut(nc).zip(&a).enumerate() {
         let off = at - change.at(t);
         row.iter_mut().zip(q).for_each(|(k, qc)| *k -= off * qc);
     }
-    let drawn = loc.with_fit(latent::coherent_draw_keeping(&loc.fit.r, nc, &kept, rng));
+    let drawn = loc.with_fit(latent::coherent_draw_keeping(&r, nc, &kept, rng));
     located_draw(res, drawn)
 }
 
@@ -448,10 +458,14 @@ impl Family<GnssResiduals> for LastingSource {
     /// which the daily volume change, 30-day running mean, had gone at most 10 % of the way from
     /// its mean before the onset to its mean after; the first on which it has gone 90 %); and
     /// the change of volume beyond what moving the main source mimics (`peak_dv_1e6m3`: the
-    /// projected pattern's daily amplitude, mean after less mean before, 10⁶ m³).
+    /// projected pattern's daily amplitude, mean after less mean before, 10⁶ m³); and the pulse
+    /// the source was searched beside (`beside_pulse`, [`pulse::beside`]: position and episode),
+    /// or null.
     fn params(&self, res: &GnssResiduals, fit: &LastingFit) -> serde_json::Value {
         let g = pattern(res, fit.pos);
-        let dv = latent::daily_amplitude(&res.fit.r, res.nc(), &g);
+        let beside = pulse::beside(res);
+        let r = pulse::taken_off(res, beside);
+        let dv = latent::daily_amplitude(&r, res.nc(), &g);
         let Change {
             before,
             after,
@@ -470,6 +484,10 @@ impl Family<GnssResiduals> for LastingSource {
             "start": date(begun), "end": date(done),
             "peak_dv_1e6m3": ((after - before) * 1e4).round() / 1e4,
             "station_share": round3(station_share(res.locating(), fit.pos).1),
+            "beside_pulse": beside.map(|p| json!({
+                "x_km": round3(p.pos[0]), "y_km": round3(p.pos[1]), "depth_km": round3(p.pos[2]),
+                "start": date(p.start), "end": date(p.end),
+            })),
         })
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {

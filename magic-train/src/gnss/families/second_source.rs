@@ -491,6 +491,64 @@ pub(super) fn declare_at(pos: [f64; 3], score: f64) -> Option<OwnedEffect> {
     })
 }
 
+/// A source's episode, as its daily volume change shows it: the 30-day running mean relative to
+/// its median (`dev`), its largest value (`peak`, at `at`) and the rows `start..=end` around it
+/// where the change stays beyond twice its robust spread and 5 % of the peak.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Episode {
+    /// The 30-day running mean less its median.
+    pub dev: Vec<f64>,
+    /// The largest deviation (signed).
+    pub peak: f64,
+    /// First row of the episode.
+    pub start: usize,
+    /// Last row of the episode.
+    pub end: usize,
+}
+
+impl Episode {
+    /// The episode of the daily amplitude `dv`.
+    pub fn of(dv: &[f64]) -> Episode {
+        let n = dv.len();
+        let hw = 15.min(n / 2);
+        let smooth: Vec<f64> = (0..n)
+            .map(|t| {
+                let (a, b) = (t.saturating_sub(hw), (t + hw + 1).min(n));
+                dv[a..b].iter().sum::<f64>() / (b - a) as f64
+            })
+            .collect();
+        let base = median(&mut smooth.clone());
+        let dev: Vec<f64> = smooth.iter().map(|v| v - base).collect();
+        let sigma = 1.4826 * median(&mut dev.iter().map(|v| v.abs()).collect::<Vec<_>>());
+        let (ipk, peak) =
+            dev.iter().enumerate().fold(
+                (0, 0.0f64),
+                |b, (i, v)| {
+                    if v.abs() > b.1.abs() {
+                        (i, *v)
+                    } else {
+                        b
+                    }
+                },
+            );
+        let thr = (2.0 * sigma).max(0.05 * peak.abs());
+        let active = |i: usize| dev[i] * peak.signum() > thr;
+        let (mut a, mut b) = (ipk, ipk);
+        while a > 0 && active(a - 1) {
+            a -= 1;
+        }
+        while b + 1 < n && active(b + 1) {
+            b += 1;
+        }
+        Episode {
+            dev,
+            peak,
+            start: a,
+            end: b,
+        }
+    }
+}
+
 impl Family<GnssResiduals> for SecondSource {
     type Fit = SourceFit;
 
@@ -529,37 +587,12 @@ impl Family<GnssResiduals> for SecondSource {
         let res = res.locating();
         let g = pattern(res, fit.pos);
         let dv = latent::daily_amplitude(&res.fit.r, res.nc(), &g);
-        let n = dv.len();
-        let hw = 15.min(n / 2);
-        let smooth: Vec<f64> = (0..n)
-            .map(|t| {
-                let (a, b) = (t.saturating_sub(hw), (t + hw + 1).min(n));
-                dv[a..b].iter().sum::<f64>() / (b - a) as f64
-            })
-            .collect();
-        let base = median(&mut smooth.clone());
-        let dev: Vec<f64> = smooth.iter().map(|v| v - base).collect();
-        let sigma = 1.4826 * median(&mut dev.iter().map(|v| v.abs()).collect::<Vec<_>>());
-        let (ipk, peak) =
-            dev.iter().enumerate().fold(
-                (0, 0.0f64),
-                |b, (i, v)| {
-                    if v.abs() > b.1.abs() {
-                        (i, *v)
-                    } else {
-                        b
-                    }
-                },
-            );
-        let thr = (2.0 * sigma).max(0.05 * peak.abs());
-        let active = |i: usize| dev[i] * peak.signum() > thr;
-        let (mut a, mut b) = (ipk, ipk);
-        while a > 0 && active(a - 1) {
-            a -= 1;
-        }
-        while b + 1 < n && active(b + 1) {
-            b += 1;
-        }
+        let Episode {
+            start: a,
+            end: b,
+            peak,
+            ..
+        } = Episode::of(&dv);
         let date = |i: usize| {
             res.fit
                 .days

@@ -1,0 +1,141 @@
+//! The pulse a lasting source is searched beside. A pulse's rise and its fall are each a change
+//! of the network's mean over the months around them: searched alone, the lasting family took
+//! a second source's pulse for the change it looks for, and its surrogates, which randomise the
+//! pulse station by station, raised its chance level (`magic synth-check` with a pulse and a
+//! lasting deflation in the same years). So the second source's best fit, when its whole
+//! episode lies inside the record, is taken off the residuals the family searches and draws
+//! from — over the episode only, and down to a straight line between its levels before and
+//! after, so that a change that stays, even at the pulse's place and within its months, is
+//! left whole as a ramp.
+
+use super::super::latent;
+use super::super::second_source::{pattern, Episode, SecondSource};
+use crate::analysis::Family;
+use crate::gnss::GnssResiduals;
+
+/// Rows of the daily volume change on each side of an episode whose mean is its level there.
+pub const SIDE_DAYS: usize = 30;
+
+/// A pulse: where its source is and the rows of its episode (`start..=end`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pulse {
+    /// x, y, depth (km).
+    pub pos: [f64; 3],
+    /// First row of the episode.
+    pub start: usize,
+    /// Last row of the episode.
+    pub end: usize,
+}
+
+/// The rows of an episode in a record of `n` rows, when at least [`SIDE_DAYS`] rows lie on
+/// each side of it: a pulse whose level before and after can be read.
+pub fn seen_whole(ep: &Episode, n: usize) -> Option<(usize, usize)> {
+    (ep.peak != 0.0 && ep.start >= SIDE_DAYS && ep.end + SIDE_DAYS < n)
+        .then_some((ep.start, ep.end))
+}
+
+/// The pulse the lasting source is searched beside in `res` (the data's own residuals; located
+/// on the held view): the second source's best fit, its episode ([`Episode`]) [`seen_whole`].
+/// Computed once on the data and kept in the held view's context, which its draws share: they
+/// are drawn without it and searched beside it too. A draw asking first (none does: the family
+/// fits the data before drawing) gets none.
+pub fn beside(res: &GnssResiduals) -> Option<Pulse> {
+    let loc = res.locating();
+    if loc.taken.is_none() {
+        return loc.ctx.pulse.get().copied().flatten();
+    }
+    *loc.ctx.pulse.get_or_init(|| {
+        let fit = SecondSource.fit(res).ok()?;
+        let dv = latent::daily_amplitude(&loc.fit.r, loc.nc(), &pattern(loc, fit.pos));
+        let (start, end) = seen_whole(&Episode::of(&dv), dv.len())?;
+        Some(Pulse {
+            pos: fit.pos,
+            start,
+            end,
+        })
+    })
+}
+
+/// `a` over the rows `start..=end` less the straight line between its means over the
+/// [`SIDE_DAYS`] rows before and after them (zero elsewhere): the part of a daily amplitude
+/// an episode adds beyond the levels it joins.
+pub fn beyond_levels(a: &[f64], start: usize, end: usize) -> Vec<f64> {
+    let n = a.len();
+    let mut out = vec![0.0; n];
+    if start < SIDE_DAYS || end + SIDE_DAYS >= n || start > end {
+        return out;
+    }
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let before = mean(&a[start - SIDE_DAYS..start]);
+    let after = mean(&a[end + 1..end + 1 + SIDE_DAYS]);
+    let span = (end + 1 - start) as f64;
+    for t in start..=end {
+        let f = (t - start) as f64 / span;
+        out[t] = a[t] - (before + f * (after - before));
+    }
+    out
+}
+
+/// The rows of `res` with `pulse`'s episode taken off (its field's daily fit beyond the
+/// [`beyond_levels`] line), or as they are without a pulse.
+pub fn taken_off(res: &GnssResiduals, pulse: Option<Pulse>) -> Vec<f64> {
+    let mut r = res.fit.r.clone();
+    let Some(p) = pulse else { return r };
+    let (nc, g) = (res.nc(), pattern(res, p.pos));
+    let a = latent::daily_amplitude(&r, nc, &g);
+    let extra = beyond_levels(&a, p.start, p.end);
+    for (row, e) in r.chunks_mut(nc).zip(&extra) {
+        row.iter_mut().zip(&g).for_each(|(v, gc)| *v -= e * gc);
+    }
+    r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 2 000 days of a small wobble plus `f(t)`.
+    fn series(f: impl Fn(usize) -> f64) -> Vec<f64> {
+        (0..2000)
+            .map(|t| 0.05 * ((t as f64) * 0.7).sin() + f(t))
+            .collect()
+    }
+
+    #[test]
+    fn a_pulse_is_seen_whole_only_with_room_on_both_sides() {
+        let pulse = series(|t| if (900..1000).contains(&t) { -5.0 } else { 0.0 });
+        let (a, b) = seen_whole(&Episode::of(&pulse), 2000).unwrap();
+        assert!(a < 900 && a > 870 && b > 990 && b < 1030, "{a} {b}");
+        // A change that stays reaches an end of the record (from either side of the median).
+        for onset in [900, 1800, 100] {
+            let stays = series(|t| if t >= onset { -5.0 } else { 0.0 });
+            assert!(seen_whole(&Episode::of(&stays), 2000).is_none(), "{onset}");
+        }
+        // A pulse too near the record's start; nothing at all.
+        let early = series(|t| if (10..100).contains(&t) { -5.0 } else { 0.0 });
+        assert!(seen_whole(&Episode::of(&early), 2000).is_none());
+        assert!(seen_whole(&Episode::of(&[0.0; 500]), 500).is_none());
+    }
+
+    #[test]
+    fn taking_an_episode_off_keeps_the_levels_it_joins() {
+        // A pulse of −5 over rows 900–999 on a change of −1 that stays from row 950 on.
+        let a = series(|t| {
+            (if (900..1000).contains(&t) { -5.0 } else { 0.0 }) + if t >= 950 { -1.0 } else { 0.0 }
+        });
+        let left: Vec<f64> = a
+            .iter()
+            .zip(beyond_levels(&a, 890, 1009))
+            .map(|(v, e)| v - e)
+            .collect();
+        // Outside the episode nothing is taken; inside, a ramp from about 0 to about −1.
+        assert!((0..890).chain(1010..2000).all(|t| left[t] == a[t]));
+        let span = 1010.0 - 890.0;
+        for t in 890..1010 {
+            let line = -((t - 890) as f64) / span;
+            assert!((left[t] - line).abs() < 0.1, "row {t}: {}", left[t]);
+        }
+        // No room on a side: nothing is taken.
+        assert!(beyond_levels(&a, 10, 1009).iter().all(|v| *v == 0.0));
+    }
+}
