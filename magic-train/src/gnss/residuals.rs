@@ -125,6 +125,8 @@ pub struct Context {
     pub(crate) source_grid: OnceLock<SourceGrid>,
     /// Cached lasting-source search grid (the second source's, reaching shallower).
     pub(crate) lasting_grid: OnceLock<SourceGrid>,
+    /// Cached best fit of the second source on the data's own residuals.
+    pub(crate) second_source: OnceLock<crate::gnss::families::second_source::SourceFit>,
     /// Cached pulse the lasting source is searched beside, if any (found on the
     /// data's own residuals; their draws share it).
     pub(crate) pulse: OnceLock<Option<crate::gnss::families::lasting_source::pulse::Pulse>>,
@@ -523,6 +525,7 @@ fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssR
             splits: shared.splits.to_vec(),
             source_grid: OnceLock::new(),
             lasting_grid: OnceLock::new(),
+            second_source: OnceLock::new(),
             pulse: OnceLock::new(),
         }),
         fit,

@@ -366,6 +366,18 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
     best
 }
 
+/// The second source's best fit on `res` (searched on the held view): once for the data's own
+/// residuals, kept in the held view's context (the lasting source is searched beside it,
+/// [`lasting_source::pulse`](super::lasting_source::pulse)); anew for a draw.
+pub fn best_fit(res: &GnssResiduals) -> SourceFit {
+    let loc = res.locating();
+    let searched = || search(loc, &latent::windows(loc));
+    match loc.taken {
+        Some(_) => *loc.ctx.second_source.get_or_init(searched),
+        None => searched(),
+    }
+}
+
 /// Neighbour window (days) of the search on intervals of the record: a pulse lasts months.
 pub const LOCATE_WINDOW: usize = 30;
 
@@ -556,8 +568,7 @@ impl Family<GnssResiduals> for SecondSource {
         "second_source"
     }
     fn fit(&self, res: &GnssResiduals) -> Result<SourceFit> {
-        let res = res.locating();
-        Ok(search(res, &latent::windows(res)))
+        Ok(best_fit(res))
     }
     fn score(&self, fit: &SourceFit) -> f64 {
         fit.score

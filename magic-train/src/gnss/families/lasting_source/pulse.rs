@@ -9,8 +9,7 @@
 //! left whole as a ramp.
 
 use super::super::latent;
-use super::super::second_source::{pattern, Episode, SecondSource};
-use crate::analysis::Family;
+use super::super::second_source::{best_fit, pattern, Episode};
 use crate::gnss::GnssResiduals;
 
 /// Rows of the daily volume change on each side of an episode whose mean is its level there.
@@ -45,7 +44,7 @@ pub fn beside(res: &GnssResiduals) -> Option<Pulse> {
         return loc.ctx.pulse.get().copied().flatten();
     }
     *loc.ctx.pulse.get_or_init(|| {
-        let fit = SecondSource.fit(res).ok()?;
+        let fit = best_fit(res);
         let dv = latent::daily_amplitude(&loc.fit.r, loc.nc(), &pattern(loc, fit.pos));
         let (start, end) = seen_whole(&Episode::of(&dv), dv.len())?;
         Some(Pulse {
