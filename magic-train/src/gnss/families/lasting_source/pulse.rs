@@ -2,14 +2,15 @@
 //! of the network's mean over the months around them: searched alone, the lasting family took
 //! a second source's pulse for the change it looks for, and its surrogates, which randomise the
 //! pulse station by station, raised its chance level (`magic synth-check` with a pulse and a
-//! lasting deflation in the same years). So the second source's best fit, when its whole
-//! episode lies inside the record, is taken off the residuals the family searches and draws
+//! lasting deflation in the same years). So the second source's best fit, when its episode
+//! comes back (a lasting change is often the second source's best fit too), is taken off the residuals the family searches and draws
 //! from — over the episode only, and down to a straight line between its levels before and
 //! after, so that a change that stays, even at the pulse's place and within its months, is
 //! left whole as a ramp.
 
 use super::super::latent;
 use super::super::second_source::{best_fit, pattern, Episode};
+use super::SCAN_DAYS;
 use crate::gnss::GnssResiduals;
 
 /// Rows of the daily volume change on each side of an episode whose mean is its level there.
@@ -26,15 +27,22 @@ pub struct Pulse {
     pub end: usize,
 }
 
-/// The rows of an episode in a record of `n` rows, when at least [`SIDE_DAYS`] rows lie on
-/// each side of it: a pulse whose level before and after can be read.
-pub fn seen_whole(ep: &Episode, n: usize) -> Option<(usize, usize)> {
-    (ep.peak != 0.0 && ep.start >= SIDE_DAYS && ep.end + SIDE_DAYS < n)
-        .then_some((ep.start, ep.end))
+/// The rows of an episode in a record of `n` rows when it comes back: at least [`SIDE_DAYS`]
+/// rows lie on each side of it, and over up to [`SCAN_DAYS`] rows before its start and after its
+/// end the change's mean lies within half its peak of its median. The episode of a change that
+/// stays reaches the record's end, or one side of it holds the change's other level.
+pub fn comes_back(ep: &Episode, n: usize) -> Option<(usize, usize)> {
+    if ep.peak == 0.0 || ep.start < SIDE_DAYS || ep.end + SIDE_DAYS >= n || ep.dev.len() != n {
+        return None;
+    }
+    let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
+    let before = mean(&ep.dev[ep.start.saturating_sub(SCAN_DAYS)..ep.start]);
+    let after = mean(&ep.dev[ep.end + 1..(ep.end + 1 + SCAN_DAYS).min(n)]);
+    (before.abs().max(after.abs()) < 0.5 * ep.peak.abs()).then_some((ep.start, ep.end))
 }
 
 /// The pulse the lasting source is searched beside in `res` (the data's own residuals; located
-/// on the held view): the second source's best fit, its episode ([`Episode`]) [`seen_whole`].
+/// on the held view): the second source's best fit, its episode ([`Episode`]) [`comes_back`].
 /// Computed once on the data and kept in the held view's context, which its draws share: they
 /// are drawn without it and searched beside it too. A draw asking first (none does: the family
 /// fits the data before drawing) gets none.
@@ -46,7 +54,7 @@ pub fn beside(res: &GnssResiduals) -> Option<Pulse> {
     *loc.ctx.pulse.get_or_init(|| {
         let fit = best_fit(res);
         let dv = latent::daily_amplitude(&loc.fit.r, loc.nc(), &pattern(loc, fit.pos));
-        let (start, end) = seen_whole(&Episode::of(&dv), dv.len())?;
+        let (start, end) = comes_back(&Episode::of(&dv), dv.len())?;
         Some(Pulse {
             pos: fit.pos,
             start,
@@ -101,19 +109,24 @@ mod tests {
     }
 
     #[test]
-    fn a_pulse_is_seen_whole_only_with_room_on_both_sides() {
+    fn a_pulse_comes_back_and_a_change_that_stays_does_not() {
         let pulse = series(|t| if (900..1000).contains(&t) { -5.0 } else { 0.0 });
-        let (a, b) = seen_whole(&Episode::of(&pulse), 2000).unwrap();
+        let (a, b) = comes_back(&Episode::of(&pulse), 2000).unwrap();
         assert!(a < 900 && a > 870 && b > 990 && b < 1030, "{a} {b}");
         // A change that stays reaches an end of the record (from either side of the median).
         for onset in [900, 1800, 100] {
             let stays = series(|t| if t >= onset { -5.0 } else { 0.0 });
-            assert!(seen_whole(&Episode::of(&stays), 2000).is_none(), "{onset}");
+            assert!(comes_back(&Episode::of(&stays), 2000).is_none(), "{onset}");
         }
+        // A change that stays whose episode noise cut short of the record's start: the other
+        // level lies beside it.
+        let mut cut = series(|t| if t >= 800 { -5.0 } else { 0.0 });
+        cut[300..340].iter_mut().for_each(|v| *v -= 5.0);
+        assert!(comes_back(&Episode::of(&cut), 2000).is_none());
         // A pulse too near the record's start; nothing at all.
         let early = series(|t| if (10..100).contains(&t) { -5.0 } else { 0.0 });
-        assert!(seen_whole(&Episode::of(&early), 2000).is_none());
-        assert!(seen_whole(&Episode::of(&[0.0; 500]), 500).is_none());
+        assert!(comes_back(&Episode::of(&early), 2000).is_none());
+        assert!(comes_back(&Episode::of(&[0.0; 500]), 500).is_none());
     }
 
     #[test]
