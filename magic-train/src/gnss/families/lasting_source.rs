@@ -459,7 +459,8 @@ impl Family<GnssResiduals> for LastingSource {
     /// its mean before the onset to its mean after; the first on which it has gone 90 %); and
     /// the change of volume beyond what moving the main source mimics (`peak_dv_1e6m3`: the
     /// projected pattern's daily amplitude, mean after less mean before, 10⁶ m³); and the pulse
-    /// the source was searched beside (`beside_pulse`, [`pulse::beside`]: position and episode),
+    /// the source was searched beside (`beside_pulse`, [`pulse::beside`]: position, episode and
+    /// prominence),
     /// or null.
     fn params(&self, res: &GnssResiduals, fit: &LastingFit) -> serde_json::Value {
         let g = pattern(res, fit.pos);
@@ -487,6 +488,7 @@ impl Family<GnssResiduals> for LastingSource {
             "beside_pulse": beside.map(|p| json!({
                 "x_km": round3(p.pos[0]), "y_km": round3(p.pos[1]), "depth_km": round3(p.pos[2]),
                 "start": date(p.start), "end": date(p.end),
+                "prominence": (p.prominence * 100.0).round() / 100.0,
             })),
         })
     }
