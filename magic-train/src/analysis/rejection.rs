@@ -56,12 +56,17 @@ pub enum Rejection {
         beside_declared: bool,
     },
     /// F declares an extra source the main source trades with (its field mostly in the main
-    /// source's span): a source beside them is not told from their trade.
+    /// source's span), and the candidate lies across the main source from it: the trade's
+    /// mirror image, not told from it.
     BesideTrade {
         /// The declared source's share of its field (in norm) beyond the main source's span.
         share: f64,
-        /// The least share beside which another source is taken.
+        /// The least share beside which another source is taken anywhere.
         least: f64,
+        /// The angle (degrees) between the two, around the main source seen from above.
+        angle: f64,
+        /// The least angle at which a candidate is taken for the mirror image.
+        least_angle: f64,
     },
     /// A source one station sees alone: most of its pattern at that station, whose own motion
     /// (a step, a settling monument) it stands for.
@@ -139,10 +144,16 @@ impl fmt::Display for Rejection {
                     ""
                 }
             ),
-            Rejection::BesideTrade { share, least } => write!(
+            Rejection::BesideTrade {
+                share,
+                least,
+                angle,
+                least_angle,
+            } => write!(
                 f,
-                "beside a declared source the main source trades with ({share:.2} of its field \
-                 beyond the main source's span, at least {least:.2} needed for another)"
+                "across the main source ({angle:.0}° around it, {least_angle:.0}° or more) from a \
+                 declared source it trades with ({share:.2} of that source's field beyond the \
+                 main source's span, at least {least:.2} needed for another anywhere)"
             ),
             Rejection::OneStation {
                 station,

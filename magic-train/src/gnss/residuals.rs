@@ -112,10 +112,10 @@ pub struct Context {
     /// of the main source and a change of the declared ones (a declared source found again
     /// lies entirely in it).
     pub sources_span: Vec<Vec<f64>>,
-    /// The smallest share of a declared extra source's field (in norm) beyond
-    /// [`Context::source_span`], where it is below [`MIN_RESOLVABLE_DECLARED`]: the main source
-    /// trades with that source, and no other source is told from the trade.
-    pub trading: Option<f64>,
+    /// The declared extra sources with less than [`MIN_RESOLVABLE_DECLARED`] of their field (in
+    /// norm) beyond [`Context::source_span`]: the main source trades with them, and a source
+    /// across it from one of them is not told from the trade.
+    pub trading: Vec<Trade>,
     /// Sum of squares of the analysed days' (real) residuals: the denominator of the latent
     /// families' shares, for the data and its surrogates alike.
     pub total_fit: f64,
@@ -420,8 +420,13 @@ pub fn residuals(
     let mut declared = Vec::new();
     let mut j = mogi::N_PARAMS;
     for e in &model.effects {
-        if let magic_core::effects::Effect::SecondSource { .. } = e {
-            declared.push(j);
+        if let magic_core::effects::Effect::SecondSource {
+            x_km,
+            y_km,
+            depth_km,
+        } = *e
+        {
+            declared.push((j, [x_km, y_km, depth_km].map(f64::from)));
         }
         j += e.n_latent();
     }
@@ -429,15 +434,21 @@ pub fn residuals(
     if declared.len() >= extra_sources {
         declared.clear();
     }
-    let declared: Vec<&(Vec<f64>, f64)> = declared.iter().filter_map(|&j| columns.get(j)).collect();
+    let declared: Vec<_> = declared
+        .iter()
+        .filter_map(|&(j, at)| Some((columns.get(j)?, at)))
+        .collect();
     let source_span = orthonormal(&columns[..k], 1e-9, 1);
     let trading = declared
         .iter()
-        .map(|(c, _)| share_beyond(&source_span, c))
-        .reduce(f64::min)
-        .filter(|&v| v < MIN_RESOLVABLE_DECLARED);
+        .map(|((c, _), at)| Trade {
+            share: share_beyond(&source_span, c),
+            at: *at,
+        })
+        .filter(|t| t.share < MIN_RESOLVABLE_DECLARED)
+        .collect();
     let mut sources = columns[..k].to_vec();
-    sources.extend(declared.into_iter().cloned());
+    sources.extend(declared.into_iter().map(|(c, _)| c.clone()));
     let shared = Shared {
         network: &p.network,
         scale,
@@ -470,6 +481,15 @@ pub fn residuals(
     })
 }
 
+/// A declared extra source the main source trades with ([`Context::trading`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trade {
+    /// Its share of its field (in norm) beyond the main source's span.
+    pub share: f64,
+    /// Its position: x, y, depth (km).
+    pub at: [f64; 3],
+}
+
 /// What the views of one set of residuals share ([`view`]).
 struct Shared<'a> {
     network: &'a Network,
@@ -478,7 +498,7 @@ struct Shared<'a> {
     main: [f64; 3],
     source_span: Vec<Vec<f64>>,
     sources_span: Vec<Vec<f64>>,
-    trading: Option<f64>,
+    trading: Vec<Trade>,
     splits: &'a [SplitName],
     days: &'a [f64],
 }
@@ -520,7 +540,7 @@ fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssR
             tangent,
             source_span: shared.source_span.clone(),
             sources_span: shared.sources_span.clone(),
-            trading: shared.trading,
+            trading: shared.trading.clone(),
             total_fit,
             splits: shared.splits.to_vec(),
             source_grid: OnceLock::new(),

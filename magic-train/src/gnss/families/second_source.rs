@@ -61,7 +61,8 @@ pub const GRID_DEPTHS: [f64; 13] = [
 /// `synth::inject::second_source::MIN_RESOLVABLE_NEAR`.)
 pub const MIN_RESOLVABLE: f64 = 0.25;
 /// The least share of a declared extra source's field (in norm) beyond the main source's span
-/// for F to take another source beside it. Below it the two trade: over the main source's
+/// for F to take another source across the main source from it ([`MIN_TRADE_ANGLE_DEG`]).
+/// Below it the two trade: over the main source's
 /// episodes the encoder gives part of the main field to the declared source, and what is left
 /// is a source across the main one from it, which the loop would add as a second. On trial
 /// seeds 101–105 under `red`, once a near lasting deflation was declared, such a copy at the
@@ -70,6 +71,13 @@ pub const MIN_RESOLVABLE: f64 = 0.25;
 /// beyond, those declared before a true second one in the two-source scenario 0.57–0.71. Half
 /// the field lies between (README, *A second source term in F*).
 pub const MIN_RESOLVABLE_DECLARED: f64 = 0.5;
+/// The least angle (degrees), around the main source seen from above, between a declared
+/// source the main one trades with ([`MIN_RESOLVABLE_DECLARED`]) and a candidate for the
+/// candidate to be taken for the trade's mirror image: the copies lie across the main source
+/// from the declared source, a true source beside the trade need not. On trial seeds 101–105
+/// under `red` (near lasting deflations, two extra sources allowed) the five copies lay
+/// 142–180° around; a half-plane's 90° is the rule, not a value fitted between them.
+pub const MIN_TRADE_ANGLE_DEG: f64 = 90.0;
 /// The largest share of a source's pattern (in energy) one station may hold
 /// ([`station_share`]): beyond it, one station's own motion — a step, a monument settling —
 /// is taken for a shallow source under it. The lasting sources kept in place of a step in the
@@ -424,14 +432,49 @@ pub fn resolvable(res: &GnssResiduals, pos: [f64; 3]) -> f64 {
     unit_field(res, pos).map_or(0.0, |g| share_beyond(&res.ctx.sources_span, &g))
 }
 
+/// The angle (degrees, 0–180) between `a` and `b` around `centre`, seen from above; 180 when
+/// either lies above the centre (no direction to tell them apart by).
+///
+/// ```
+/// use magic_train::gnss::families::second_source::angle_around;
+/// let centre = [1.0, 1.0, 5.0];
+/// assert!((angle_around(centre, [3.0, 1.0, 4.0], [1.0, 4.0, 2.0]) - 90.0).abs() < 1e-9);
+/// assert!((angle_around(centre, [3.0, 1.0, 4.0], [-2.0, 1.0, 6.0]) - 180.0).abs() < 1e-9);
+/// assert_eq!(angle_around(centre, [1.0, 1.0, 3.0], [2.0, 2.0, 3.0]), 180.0);
+/// ```
+pub fn angle_around(centre: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let (u, v) = (
+        [a[0] - centre[0], a[1] - centre[1]],
+        [b[0] - centre[0], b[1] - centre[1]],
+    );
+    let norms = u[0].hypot(u[1]) * v[0].hypot(v[1]);
+    if norms <= 0.0 {
+        return 180.0;
+    }
+    ((u[0] * v[0] + u[1] * v[1]) / norms)
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
+}
+
 /// Why a second source at `pos` is not a discovery: its field mostly a move of the main source
-/// and a change of the declared ones ([`resolvable`] below [`MIN_RESOLVABLE`]), or F declares
-/// a source the main one trades with ([`MIN_RESOLVABLE_DECLARED`]).
+/// and a change of the declared ones ([`resolvable`] below [`MIN_RESOLVABLE`]), or it lies
+/// across the main source from a declared source the main one trades with
+/// ([`MIN_RESOLVABLE_DECLARED`], [`MIN_TRADE_ANGLE_DEG`]).
 pub(super) fn unresolvable(res: &GnssResiduals, pos: [f64; 3]) -> Option<Rejection> {
-    if let Some(share) = res.ctx.trading {
+    let across = res
+        .ctx
+        .trading
+        .iter()
+        .map(|t| (t.share, angle_around(res.ctx.main_source, t.at, pos)))
+        .filter(|&(_, angle)| angle >= MIN_TRADE_ANGLE_DEG)
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    if let Some((share, angle)) = across {
         return Some(Rejection::BesideTrade {
             share,
             least: MIN_RESOLVABLE_DECLARED,
+            angle,
+            least_angle: MIN_TRADE_ANGLE_DEG,
         });
     }
     let share = resolvable(res, pos);

@@ -15,7 +15,7 @@ fn plain<'a>(network: &'a Network, scale: &'a [f64], days: &'a [f64]) -> Shared<
         main: [0.0; 3],
         source_span: Vec::new(),
         sources_span: Vec::new(),
-        trading: None,
+        trading: Vec::new(),
         splits: &[SplitName::Train],
         days,
     }
@@ -537,17 +537,20 @@ fn a_declared_source_found_again_is_not_a_new_source() {
 }
 
 /// A declared source the main one trades with (its field mostly in the main source's span)
-/// rejects every further source; one mostly beyond it does not.
+/// rejects a source across the main source from it, not one on its side; with no such declared
+/// source (none, or all mostly beyond the span) neither is rejected.
 #[test]
-fn no_source_is_taken_beside_a_declared_one_the_main_source_trades_with() {
+fn no_source_is_taken_across_a_declared_one_the_main_source_trades_with() {
     use crate::analysis::Rejection;
-    use crate::gnss::families::second_source::{rejection, MIN_RESOLVABLE_DECLARED};
+    use crate::gnss::families::second_source::{
+        rejection, MIN_RESOLVABLE_DECLARED, MIN_TRADE_ANGLE_DEG,
+    };
     let (network, scale, main, span) = akutan_main_source();
     let nc = scale.len();
     let rows = vec![vec![0.0; nc]; 10];
     let days: Vec<f64> = (0..rows.len()).map(|t| t as f64).collect();
     let far = [main[0] + 8.0, main[1] - 3.0, 5.0];
-    let with = |trading: Option<f64>| {
+    let with = |trading: Vec<Trade>| {
         let shared = Shared {
             main,
             source_span: span.clone(),
@@ -557,12 +560,25 @@ fn no_source_is_taken_beside_a_declared_one_the_main_source_trades_with() {
         };
         rejection(&view(&shared, &rows, Vec::new()), far)
     };
-    assert_eq!(with(None), None);
-    assert_eq!(
-        with(Some(0.4)),
+    let trade = |dx: f64, dy: f64| Trade {
+        share: 0.4,
+        at: [main[0] + dx, main[1] + dy, 3.0],
+    };
+    assert_eq!(with(Vec::new()), None);
+    // On the candidate's side of the main source (about 4° from it): taken.
+    assert_eq!(with(vec![trade(3.0, -1.0)]), None);
+    // Across from it (about 177°): the trade's mirror image.
+    match with(vec![trade(3.0, -1.0), trade(-3.0, 1.0)]) {
         Some(Rejection::BesideTrade {
-            share: 0.4,
-            least: MIN_RESOLVABLE_DECLARED
-        })
-    );
+            share,
+            least,
+            angle,
+            least_angle,
+        }) => {
+            assert_eq!((share, least), (0.4, MIN_RESOLVABLE_DECLARED));
+            assert_eq!(least_angle, MIN_TRADE_ANGLE_DEG);
+            assert!((angle - 177.0).abs() < 1.0, "{angle}");
+        }
+        other => panic!("expected a rejection beside the trade, got {other:?}"),
+    }
 }
