@@ -8,7 +8,7 @@
 //! placements, two effects at once and a second noise model).
 
 use magic_train::gnss::recovery::{brief_recipe, check_one};
-use magic_train::gnss::synth::{self, Scenario, Spec};
+use magic_train::gnss::synth::{self, Scenario, Site, Spec};
 use magic_train::{AnalysisOptions, OwnedEffect};
 
 /// The step offset in the analysis report (JSON) against the effect's f32 offset (mm): the report
@@ -26,7 +26,7 @@ fn check_with(scenario: Scenario, opts: &AnalysisOptions) {
     let cfg = brief_recipe();
     for seed in [1, 2] {
         let spec = Spec::new(scenario, seed);
-        let check = check_one(&spec, &cfg, opts).unwrap();
+        let check = check_one(&spec, &Site::akutan(), &cfg, opts).unwrap();
         let (r, a) = (check.recovery, check.analysis);
         assert!(
             r.ok(),
@@ -124,6 +124,7 @@ fn fitted_effect_reproduces_the_fit() {
     let cfg = brief_recipe();
     let a = check_one(
         &Spec::new(Scenario::Step, 1),
+        &Site::akutan(),
         &cfg,
         &AnalysisOptions::default(),
     )

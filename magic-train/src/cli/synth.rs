@@ -12,7 +12,7 @@ use crate::gnss::recovery::looped::{loop_table, LoopRun};
 use crate::gnss::recovery::misses::miss_table;
 use crate::gnss::recovery::{check_one, recovery_table};
 use crate::gnss::synth::truth::injected;
-use crate::gnss::synth::{self, NoiseModel, Scenario, Spec};
+use crate::gnss::synth::{self, NoiseModel, Scenario, Site, Spec};
 use crate::problem::Problem;
 use anyhow::{Context, Result};
 use clap::Args;
@@ -41,6 +41,27 @@ pub struct SynthCmd {
     /// List the scenarios and exit.
     #[arg(long)]
     list: bool,
+    #[command(flatten)]
+    site: SiteArg,
+}
+
+/// The network synthetic data are made on.
+#[derive(Args, Clone, Debug, Default)]
+pub struct SiteArg {
+    /// The station network, a `stations.json` (`{"STA": {"xE": km, "yN": km, "zV": km}, …}`, as
+    /// the release and `magic prepare` write it), the main source under its centroid 7 km deep
+    /// and the source bounds over its box (default: Akutan, the paper's release).
+    #[arg(long, value_name = "FILE")]
+    stations: Option<PathBuf>,
+}
+
+impl SiteArg {
+    /// The site: the network of `--stations`, or Akutan.
+    pub fn site(&self) -> Result<Site> {
+        self.stations
+            .as_deref()
+            .map_or_else(|| Ok(Site::akutan()), Site::read)
+    }
 }
 
 /// Runs `magic synth`.
@@ -55,7 +76,7 @@ pub fn synth(a: &SynthCmd) -> Result<()> {
     let s = Spec::new(a.scenario, a.seed)
         .noise(a.noise)
         .placed(a.placement)
-        .generate();
+        .generate_on(&a.site.site()?)?;
     write_dir(&s.problem, out)?;
     write_file(
         &out.join("truth.json"),
@@ -140,6 +161,8 @@ pub struct SynthCheckCmd {
     table: Option<PathBuf>,
     #[command(flatten)]
     json: JsonOut,
+    #[command(flatten)]
+    site: SiteArg,
 }
 
 /// Runs `magic synth-check`: for every scenario, noise model, placement and seed, generate the
@@ -152,6 +175,7 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
         main_source: a.main_source,
         ..AnalysisOptions::default()
     };
+    let site = a.site.site()?;
     let (mut rows, mut out) = (Vec::new(), Vec::new());
     let mut coverage = Coverage::default();
     let start = std::time::Instant::now();
@@ -162,7 +186,7 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
         a.first_seed..a.first_seed + a.seeds,
     ) {
         let t0 = std::time::Instant::now();
-        let check = check_one(&spec, &cfg, &opts)?;
+        let check = check_one(&spec, &site, &cfg, &opts)?;
         let (r, an) = (check.recovery, check.analysis);
         let secs = t0.elapsed().as_secs_f64();
         eprintln!(
@@ -258,6 +282,8 @@ pub struct SynthLoopCmd {
     /// a stopped command's).
     #[arg(long, value_name = "DIR")]
     summarise: Option<PathBuf>,
+    #[command(flatten)]
+    site: SiteArg,
 }
 
 /// `magic synth-loop --summarise DIR`: the summary table of the runs under `dir`, read back from
@@ -349,6 +375,7 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
         "| injected | placement | noise | seed | effects added (explained vs chance) | B test before → after | C test before → after |\n|---|---|---|---|---|---|---|\n",
     );
     print!("{table}");
+    let site = a.site.site()?;
     std::fs::create_dir_all(&a.out)?;
     let mut runs = Vec::new();
     for spec in specs(
@@ -358,7 +385,7 @@ pub fn run_loop(a: &SynthLoopCmd) -> Result<()> {
         a.seed..a.seed + a.seeds.max(1),
     ) {
         let seed = spec.seed;
-        let s = spec.generate();
+        let s = spec.generate_on(&site)?;
         let opts = LoopOptions {
             seed,
             train: s

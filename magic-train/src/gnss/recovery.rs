@@ -11,7 +11,7 @@
 //! family ([`same_effect`]): both add the same term to F.
 
 use super::synth::truth::{background, injected, Injected};
-use super::synth::Spec;
+use super::synth::{Site, Spec};
 use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate, Rejection};
 use crate::numerics::median;
 use crate::train::{train_model, ModelKind, TrainConfig};
@@ -422,10 +422,15 @@ pub fn brief_recipe() -> TrainConfig {
         .with_warmup(Some(0))
 }
 
-/// Generates a dataset, trains a B model on it (seeded with the dataset's seed) and analyses
-/// its residuals.
-pub fn check_one(spec: &Spec, cfg: &TrainConfig, opts: &AnalysisOptions) -> Result<Check> {
-    let s = spec.generate();
+/// Generates a dataset on `site`, trains a B model on it (seeded with the dataset's seed) and
+/// analyses its residuals.
+pub fn check_one(
+    spec: &Spec,
+    site: &Site,
+    cfg: &TrainConfig,
+    opts: &AnalysisOptions,
+) -> Result<Check> {
+    let s = spec.generate_on(site)?;
     let (model, _) = train_model(&s.problem, ModelKind::B, &[], cfg, spec.seed)?;
     let bytes = model.encode()?;
     let m = Model::decode(&bytes)?;

@@ -204,7 +204,8 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
         [8.0, -3.0, 6.0],
         [0.3, 3.2, 7.0],
     ] {
-        let generator = crate::gnss::synth::resolvable(&network.stations, p);
+        let generator =
+            crate::gnss::synth::resolvable(&network.stations, crate::gnss::synth::SOURCE, p);
         assert!(
             (at(p) - generator).abs() < 1e-6,
             "{p:?}: {} vs {generator}",

@@ -1,4 +1,5 @@
-//! Synthetic GNSS data on the Akutan network, in the exact layout of the paper's `gnss/` folder,
+//! Synthetic GNSS data on the Akutan network (or another, [`Site`]), in the exact layout of the
+//! paper's `gnss/` folder,
 //! so every command reads it like measured data; with the truth behind it (`truth.json`), so the
 //! residual analysis and the loop can be checked against what was injected
 //! ([`crate::gnss::recovery`]).
@@ -23,6 +24,7 @@ pub mod inject;
 pub mod noise;
 pub mod record;
 pub mod scenario;
+pub mod site;
 pub mod source;
 pub mod truth;
 
@@ -31,6 +33,7 @@ pub use inject::second_source::resolvable;
 pub use noise::NoiseModel;
 pub use record::{iso_date, Layout};
 pub use scenario::{Distance, Injection, Scenario, Shape};
+pub use site::Site;
 pub use source::SOURCE;
 
 use super::{GnssProblem, Network};
@@ -101,13 +104,24 @@ impl Spec {
         }
     }
 
-    /// Generates the dataset.
+    /// Generates the dataset on the Akutan network ([`Site::akutan`]).
     pub fn generate(&self) -> Synthetic {
+        self.generate_on(&Site::akutan())
+            .expect("every scenario has room on the Akutan network (tested)")
+    }
+
+    /// Generates the dataset on `site`; an error when a scenario's source has no room on its
+    /// network.
+    pub fn generate_on(&self, site: &Site) -> anyhow::Result<Synthetic> {
         let layout = self.noise.layout();
-        let network = Network::akutan();
-        let (history, mut mm, background) = self.noise.clean_rows(self.seed, &network, &layout);
+        let network = site.network.clone();
+        let (history, mut mm, background) =
+            self.noise
+                .clean_rows(self.seed, &network, site.source, &layout);
         let ctx = Ctx {
             network: &network,
+            main: site.source,
+            apart_box: site.apart_box,
             layout,
             placement: self.placement,
             background: &background,
@@ -118,18 +132,18 @@ impl Spec {
             .injections()
             .iter()
             .map(|inj| inj.inject(&ctx, &mut mm))
-            .collect();
+            .collect::<anyhow::Result<_>>()?;
         let data = record::dataset(&layout, &network, &mm, self.source_label());
-        let truth = truth::truth(self, &history, &effects, &background.described);
-        Synthetic {
+        let truth = truth::truth(self, site.source, &history, &effects, &background.described);
+        Ok(Synthetic {
             problem: GnssProblem {
                 network,
                 data,
-                source_bounds: super::SourceBounds::paper(),
+                source_bounds: site.bounds,
             },
             dv: history.dv,
             truth,
-        }
+        })
     }
 
     fn source_label(&self) -> String {
@@ -165,12 +179,12 @@ pub fn generate(scenario: Scenario, seed: u64) -> Synthetic {
     Spec::new(scenario, seed).generate()
 }
 
-/// The main source's field (mm, channel order uₑ ×S, uₙ ×S, uᵥ ×S) on every day of `dv`.
-fn source_rows(network: &Network, dv: &[f64]) -> Vec<Vec<f64>> {
+/// The main source's field at `main` (mm, channel order uₑ ×S, uₙ ×S, uᵥ ×S) on every day of `dv`.
+fn source_rows(network: &Network, main: [f64; 3], dv: &[f64]) -> Vec<Vec<f64>> {
     let mut u = vec![0.0f64; 3 * network.len()];
     dv.iter()
         .map(|v| {
-            let p = [SOURCE[0], SOURCE[1], SOURCE[2], *v];
+            let p = [main[0], main[1], main[2], *v];
             mogi::field(&network.stations, &p, &mut u).expect("valid synthetic source");
             u.clone()
         })

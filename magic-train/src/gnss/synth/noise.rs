@@ -83,6 +83,7 @@ impl NoiseModel {
         self,
         seed: u64,
         network: &Network,
+        main: [f64; 3],
         layout: &Layout,
     ) -> (History, Vec<Vec<f64>>, Background) {
         match self {
@@ -90,13 +91,13 @@ impl NoiseModel {
                 // One generator for the history and the noise, in this order.
                 let mut rng = StdRng::seed_from_u64(seed);
                 let history = source::paper(&mut rng, layout);
-                let mut rows = super::source_rows(network, &history.dv);
+                let mut rows = super::source_rows(network, main, &history.dv);
                 paper(&mut rng, network.len(), &mut rows);
                 (history, rows, Background::default())
             }
             NoiseModel::Red => {
                 let history = source::red(&mut stream(seed, SALT_SOURCE), layout);
-                let mut rows = super::source_rows(network, &history.dv);
+                let mut rows = super::source_rows(network, main, &history.dv);
                 let background = red(seed, network, layout, &mut rows);
                 (history, rows, background)
             }

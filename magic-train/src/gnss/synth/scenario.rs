@@ -101,7 +101,7 @@ impl Injection {
 
     /// Adds the effect to `rows` (mm, one row per day of the record) and returns what was
     /// added.
-    pub fn inject(self, ctx: &Ctx<'_>, rows: &mut [Vec<f64>]) -> Injected {
+    pub fn inject(self, ctx: &Ctx<'_>, rows: &mut [Vec<f64>]) -> anyhow::Result<Injected> {
         let mut rng = super::draw::stream(ctx.seed, self.salt());
         let rng = &mut rng;
         let params = match self {
@@ -115,11 +115,11 @@ impl Injection {
                 inject::step::inject_elsewhere(ctx, rng, rows, first)
             }
             Injection::SecondSource { shape, distance } => {
-                inject::second_source::inject(ctx, rng, rows, shape, distance)
+                inject::second_source::inject(ctx, rng, rows, shape, distance)?
             }
             Injection::Drift => inject::drift::inject(ctx, rng, rows),
         };
-        Injected::new(self.family(), params)
+        Ok(Injected::new(self.family(), params))
     }
 }
 

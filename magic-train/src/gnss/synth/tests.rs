@@ -338,7 +338,7 @@ fn a_second_source_is_where_and_when_the_truth_says() {
                 assert!(pos[2] >= d0 && pos[2] <= d1, "{what}: {} km deep", pos[2]);
                 assert!(pos[0] >= bx[0] && pos[0] <= bx[1] && pos[1] >= bx[2] && pos[1] <= bx[3]);
                 assert!(
-                    resolvable(&network.stations, pos) >= min_res - 1e-3,
+                    resolvable(&network.stations, SOURCE, pos) >= min_res - 1e-3,
                     "{what}"
                 );
                 let layout = noise.layout();
@@ -531,4 +531,116 @@ fn the_red_truth_lists_what_its_noise_holds() {
         injected(&p.truth),
         vec![serde_json::from_value::<Injected>(p.truth["effect"].clone()).unwrap()]
     );
+}
+
+/// A network of `n` stations on a ring of `r` km around (`cx`, `cy`), one at its centre.
+fn ring(n: usize, r: f64, cx: f64, cy: f64) -> Network {
+    let mut net = Network {
+        names: vec!["C000".into()],
+        stations: vec![magic_core::mogi::Station {
+            x_km: cx,
+            y_km: cy,
+            z_km: 0.4,
+        }],
+    };
+    for i in 1..n {
+        let th = std::f64::consts::TAU * i as f64 / (n - 1) as f64;
+        net.names.push(format!("R{i:03}"));
+        net.stations.push(magic_core::mogi::Station {
+            x_km: cx + r * th.cos(),
+            y_km: cy + r * th.sin(),
+            z_km: 0.2 + 0.05 * i as f64,
+        });
+    }
+    net
+}
+
+#[test]
+fn another_network_carries_its_own_source_and_bounds() {
+    let site = Site::on(ring(9, 8.0, 40.0, -25.0)).unwrap();
+    assert!((site.source[0] - 40.0).abs() < 1e-9 && (site.source[1] + 25.0).abs() < 1e-9);
+    for sc in [
+        Scenario::Clean,
+        Scenario::SecondSource,
+        Scenario::SecondSourceNear,
+        Scenario::LastingDeflationFar,
+        Scenario::StepElevation,
+    ] {
+        let s = Spec::new(sc, 3).generate_on(&site).unwrap();
+        assert_eq!(s.problem.network, site.network);
+        assert_eq!(s.problem.source_bounds, site.bounds);
+        assert_eq!(s.problem.data.columns.len(), 3 * 9);
+        assert_eq!(s.truth["source"]["x_km"], 40.0);
+        for e in injected(&s.truth)
+            .iter()
+            .filter(|e| e.family == "second_source")
+        {
+            let at = |k: &str| e.params[k].as_f64().unwrap();
+            let r = (at("x_km") - 40.0).hypot(at("y_km") + 25.0);
+            let (lo, hi) = match sc {
+                Scenario::SecondSourceNear => (2.0, 4.0),
+                Scenario::LastingDeflationFar => (6.0, 12.0),
+                _ => (5.0, f64::INFINITY),
+            };
+            assert!(
+                r >= lo && r <= hi,
+                "{}: {r} km from the main source",
+                sc.name()
+            );
+        }
+    }
+    // Akutan as a site is the built-in generator.
+    let spec = Spec::new(Scenario::SecondSource, 2);
+    assert_eq!(
+        fingerprint(&spec.generate_on(&Site::akutan()).unwrap()),
+        fingerprint(&spec.generate())
+    );
+}
+
+#[test]
+fn a_network_with_no_room_for_a_scenario_is_an_error() {
+    let e = Site::on(ring(4, 5.0, 0.0, 0.0)).unwrap_err().to_string();
+    assert!(e.contains("at least 5 stations (found 4)"), "{e}");
+    // Stations within 1 km: no far source lies within their box ± 2 km.
+    let tiny = Site::on(ring(6, 0.5, 0.0, 0.0)).unwrap();
+    let e = Spec::new(Scenario::LastingDeflationFar, 1)
+        .generate_on(&tiny)
+        .err()
+        .expect("no room for a far source")
+        .to_string();
+    assert!(
+        e.contains("no position for a far second source (lasting)"),
+        "{e}"
+    );
+    assert!(Spec::new(Scenario::Step, 1).generate_on(&tiny).is_ok());
+}
+
+#[test]
+fn a_prepared_folder_lends_the_site_its_bounds() {
+    let dir = std::env::temp_dir().join(format!("magic-site-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = Spec::new(Scenario::Clean, 1)
+        .generate_on(&Site::on(ring(7, 6.0, 10.0, 5.0)).unwrap())
+        .unwrap();
+    crate::gnss::data::write_dir(&s.problem, &dir).unwrap();
+    let stations = dir.join("stations.json");
+    let site = Site::read(&stations).unwrap();
+    for (a, b) in site.bounds.0.iter().zip(s.problem.source_bounds.0) {
+        assert!(
+            (a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12,
+            "{a:?} {b:?}"
+        );
+    }
+    let wide = crate::gnss::SourceBounds::from_network(&site.network, 2.0, [1.0, 15.0]).unwrap();
+    wide.write_dir(&dir).unwrap();
+    assert_eq!(Site::read(&stations).unwrap().bounds.0[2], [1.0, 15.0]);
+    // Bounds that leave the main source out: an error naming the file and the variable.
+    let away = crate::gnss::SourceBounds([[20.0, 30.0], [0.0, 10.0], [2.0, 20.0], [-10.0, 10.0]]);
+    away.write_dir(&dir).unwrap();
+    let e = format!("{:#}", Site::read(&stations).unwrap_err());
+    assert!(
+        e.contains("bounds.json") && e.contains("x_km 10.000"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -20,7 +20,7 @@
 //! clean data is right, not wrong. Single-effect scenarios also carry the effect as `effect`
 //! (`null` for `clean`), as files written before `effects` existed did.
 
-use super::source::{History, SOURCE};
+use super::source::History;
 use super::Spec;
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -47,6 +47,7 @@ impl Injected {
 /// The truth of a generated dataset.
 pub fn truth(
     spec: &Spec,
+    source: [f64; 3],
     history: &History,
     effects: &[Injected],
     background: &[Injected],
@@ -56,7 +57,7 @@ pub fn truth(
         "seed": spec.seed,
         "noise": spec.noise.name(),
         "placement": spec.placement_label(),
-        "source": {"x_km": SOURCE[0], "y_km": SOURCE[1], "depth_km": SOURCE[2]},
+        "source": {"x_km": source[0], "y_km": source[1], "depth_km": source[2]},
         "episodes": history.episodes,
         "effects": effects,
         "background": background,

@@ -18,6 +18,10 @@ use crate::gnss::Network;
 pub struct Ctx<'a> {
     /// The network.
     pub network: &'a Network,
+    /// The main source's position and depth (km).
+    pub main: [f64; 3],
+    /// The box (x0, x1, y0, y1; km) a second source apart from the main one is drawn over.
+    pub apart_box: [f64; 4],
     /// The record.
     pub layout: Layout,
     /// The period in which events begin.

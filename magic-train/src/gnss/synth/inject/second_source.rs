@@ -19,8 +19,8 @@
 
 use super::super::draw::round3;
 use super::super::scenario::{Distance, Shape};
-use super::super::source::SOURCE;
 use super::Ctx;
+use anyhow::{bail, Result};
 use magic_core::mogi::{self, Station};
 use rand::rngs::StdRng;
 use rand::Rng;
@@ -31,8 +31,8 @@ use std::f64::consts::{PI, TAU};
 pub const MIN_RESOLVABLE: f64 = 0.5;
 /// The same for a source 2–4 km from the main one (the median share there is about 0.3).
 pub const MIN_RESOLVABLE_NEAR: f64 = 0.25;
-/// Draws of a position before giving up (the constants above admit most draws: a failure is a
-/// bug in them, not bad luck).
+/// Draws of a position before giving up (on Akutan the constants above admit most draws; on
+/// another network a failure says its geometry leaves no room for the scenario).
 const MAX_DRAWS: usize = 100_000;
 /// Smallest displacement (mm, norm at the most displaced station) of a lasting deflation at its
 /// final volume.
@@ -40,12 +40,13 @@ pub const MIN_VISIBLE_MM: f64 = 8.0;
 /// Margin (km) around the network's box within which a far source lies.
 pub const BOX_MARGIN_KM: f64 = 2.0;
 
-/// How distinct a second source at `p` is from the main one for this network: the share (in
+/// How distinct a second source at `p` is from the main one at `main` (x, y, depth in km) for
+/// this network: the share (in
 /// norm, channels weighted by the white noise) of its displacement field that the main source
 /// cannot produce by changing its position, depth or volume to first order. Near the main source
 /// it is close to 0: the encoder would simply move the main source and nothing would be left to
 /// find.
-pub fn resolvable(stations: &[Station], p: [f64; 3]) -> f64 {
+pub fn resolvable(stations: &[Station], main: [f64; 3], p: [f64; 3]) -> f64 {
     let ns = stations.len();
     let w = |c: usize| [1.0 / 1.2, 1.0 / 1.2, 1.0 / 3.5][c / ns];
     let field = |q: [f64; 4]| -> Vec<f64> {
@@ -53,7 +54,7 @@ pub fn resolvable(stations: &[Station], p: [f64; 3]) -> f64 {
         mogi::field(stations, &q, &mut u).expect("valid source");
         u.iter().enumerate().map(|(c, v)| v * w(c)).collect()
     };
-    let main = [SOURCE[0], SOURCE[1], SOURCE[2], 1.0];
+    let main = [main[0], main[1], main[2], 1.0];
     let mut basis: Vec<Vec<f64>> = Vec::new();
     for j in 0..4 {
         let h = 1e-4;
@@ -115,7 +116,7 @@ fn position(
     shape: Shape,
     distance: Distance,
     accept: &dyn Fn([f64; 3]) -> bool,
-) -> ([f64; 3], f64) {
+) -> Result<([f64; 3], f64)> {
     let stations = &ctx.network.stations;
     let bx = network_box(stations, BOX_MARGIN_KM);
     let min_res = if distance == Distance::Near {
@@ -126,8 +127,8 @@ fn position(
     for _ in 0..MAX_DRAWS {
         let p = match distance {
             Distance::Apart => [
-                rng.random_range(-8.0..12.0),
-                rng.random_range(-5.0..7.0),
+                rng.random_range(ctx.apart_box[0]..ctx.apart_box[1]),
+                rng.random_range(ctx.apart_box[2]..ctx.apart_box[3]),
                 rng.random_range(4.0..8.0),
             ],
             Distance::Near | Distance::Far => {
@@ -142,18 +143,24 @@ fn position(
                 } else {
                     rng.random_range(3.0..4.0)
                 };
-                [SOURCE[0] + r * th.cos(), SOURCE[1] + r * th.sin(), d]
+                [ctx.main[0] + r * th.cos(), ctx.main[1] + r * th.sin(), d]
             }
         };
-        let res = resolvable(stations, p);
+        let res = resolvable(stations, ctx.main, p);
         let inside = p[0] >= bx[0] && p[0] <= bx[1] && p[1] >= bx[2] && p[1] <= bx[3];
         let apart =
-            distance != Distance::Apart || (p[0] - SOURCE[0]).hypot(p[1] - SOURCE[1]) >= 5.0;
+            distance != Distance::Apart || (p[0] - ctx.main[0]).hypot(p[1] - ctx.main[1]) >= 5.0;
         if inside && apart && res >= min_res && accept(p) {
-            return (p, res);
+            return Ok((p, res));
         }
     }
-    panic!("no second-source position {distance:?} ({shape:?}) in {MAX_DRAWS} draws");
+    bail!(
+        "no position for a {} second source ({}) on this network in {MAX_DRAWS} draws: within \
+         its box ± {BOX_MARGIN_KM} km, at its distance from the main source and told apart \
+         from it",
+        format!("{distance:?}").to_lowercase(),
+        format!("{shape:?}").to_lowercase()
+    )
 }
 
 /// The share of its final (pulse: peak) volume change a source has `dt` days after its start,
@@ -177,13 +184,13 @@ pub fn inject(
     rows: &mut [Vec<f64>],
     shape: Shape,
     distance: Distance,
-) -> serde_json::Value {
+) -> Result<serde_json::Value> {
     let stations = &ctx.network.stations;
     let (p0, p1) = ctx.period();
     let len = p1 - p0;
     let (p, peak, start, days) = match shape {
         Shape::Pulse => {
-            let (p, res) = position(ctx, rng, shape, distance, &|_| true);
+            let (p, res) = position(ctx, rng, shape, distance, &|_| true)?;
             // Peak ΔV: the part of the field the main source cannot mimic has a network RMS of
             // 6–9 mm at the peak (the whole field at most 30 mm at any station); inflation or
             // deflation.
@@ -204,7 +211,7 @@ pub fn inject(
                     .iter()
                     .any(|v| *v >= MIN_VISIBLE_MM)
             };
-            let (p, _) = position(ctx, rng, shape, distance, &visible);
+            let (p, _) = position(ctx, rng, shape, distance, &visible)?;
             let rise = rng.random_range(60..=120usize);
             let margin = len / 10;
             let start = rng.random_range(p0 + margin..p1 - margin - rise);
@@ -223,10 +230,10 @@ pub fn inject(
             *o += v;
         }
     }
-    json!({
+    Ok(json!({
         "x_km": round3(p[0]), "y_km": round3(p[1]), "depth_km": round3(p[2]),
         "start": ctx.date(start), "end": ctx.date(start + days),
         "peak_dv_1e6m3": (peak * 1e4).round() / 1e4,
         "shape": match shape { Shape::Pulse => "pulse", Shape::Lasting => "lasting" },
-    })
+    }))
 }
