@@ -50,7 +50,8 @@ pub struct SynthCmd {
 pub struct SiteArg {
     /// The station network, a `stations.json` (`{"STA": {"xE": km, "yN": km, "zV": km}, …}`, as
     /// the release and `magic prepare` write it), the main source under its centroid 7 km deep
-    /// and the source bounds over its box (default: Akutan, the paper's release).
+    /// and the source bounds over its box, or those of a `bounds.json` beside the file (default:
+    /// Akutan, the paper's release).
     #[arg(long, value_name = "FILE")]
     stations: Option<PathBuf>,
 }
