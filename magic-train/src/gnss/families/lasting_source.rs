@@ -39,7 +39,7 @@ use super::latent::{self, round3, Prefix};
 use super::second_source::{
     declare_at, distinct_best, grid_at, located_draw, on_bound, one_station, pattern,
     position_params, refine, resample_at, resolvable, station_share, translations, unresolvable,
-    MIN_RESOLVABLE,
+    with_translations, MIN_RESOLVABLE,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
@@ -55,7 +55,6 @@ use serde_json::json;
 
 mod change;
 pub mod pulse;
-mod surrogate;
 use change::Change;
 
 /// Candidates refined in the search.
@@ -372,6 +371,27 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
     best
 }
 
+/// The lasting source's surrogate for a source at `pos` ([`latent::surrogate`]) where it is
+/// scored, given back the held view's part beyond these residuals — the main source's moves, as
+/// the data hold them, without the daily fit of the source (and the translations) there
+/// ([`GnssResiduals::beside_moves`]): they are what the source is located beside, in the data as
+/// in the draw. Randomised station by station (as the surrogates' flips would), they lose the
+/// coherence by which the free view projects them off, and swell the chance level; the source's
+/// own fit is left out because the family also scores a statistic on the held view, which must
+/// not find the source in its own surrogates. The pulse the family is searched beside
+/// ([`pulse::beside`]) is taken off first: randomised station by station, a pulse's months make
+/// changes of the mean at every station by chance.
+fn surrogate_beside_moves(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
+    let without = res.with_fit(pulse::taken_off(res, pulse::beside(res)));
+    let drawn = latent::surrogate(&without, &with_translations(res, pos), rng);
+    let Some(held) = res.held.as_deref() else {
+        return drawn;
+    };
+    let keep = with_translations(held, pos);
+    let (_, rest) = latent::split_effect(&held.fit.r, held.nc(), &keep);
+    res.beside_moves(drawn, &rest)
+}
+
 /// The lasting source's bootstrap draw: the change kept as modelled ([`Change`] of the source's
 /// daily amplitude beside the translations, whose daily fits are kept too), everything else
 /// phase-randomised with phases shared by every channel ([`latent::coherent_draw_keeping`]);
@@ -431,7 +451,7 @@ impl Family<GnssResiduals> for LastingSource {
         fit: &LastingFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(surrogate::draw(res, fit, rng))
+        Ok(surrogate_beside_moves(res, fit.pos, rng))
     }
     /// Position; onset (the scanned epoch: for a change that builds over months, near its
     /// middle), start and end of the change (the day after the last one before the onset on
