@@ -1,4 +1,5 @@
-//! Tests of the lasting-source family: its grid, its score, its search and its episodes.
+//! Tests of the lasting-source family: its grid, its offsets, its score, its candidates and its
+//! search (its pulse and its change are tested in their own modules).
 
 use super::*;
 use rand::rngs::StdRng;
