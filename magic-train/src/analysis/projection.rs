@@ -35,6 +35,22 @@ pub fn share_beyond(basis: &[Vec<f64>], v: &[f64]) -> f64 {
     }
 }
 
+/// Each coordinate's leverage under the orthonormal `basis` (`n` coordinates): the diagonal of
+/// the projector onto its span, `Σ_q q_c²`. Noise of unit variance on every coordinate keeps
+/// `1 − h_c` of it on coordinate `c` once projected off the span.
+///
+/// ```
+/// use magic_train::analysis::projection::leverage;
+/// let s = 0.5f64.sqrt();
+/// let h = leverage(&[vec![s, s, 0.0]], 3);
+/// assert!((h[0] - 0.5).abs() < 1e-12 && (h[1] - 0.5).abs() < 1e-12 && h[2] == 0.0);
+/// ```
+pub fn leverage(basis: &[Vec<f64>], n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|c| basis.iter().map(|q| q.get(c).map_or(0.0, |v| v * v)).sum())
+        .collect()
+}
+
 /// A column for [`orthonormal`], with its largest entry (absolute) as its scale.
 ///
 /// ```
