@@ -372,10 +372,11 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
 }
 
 /// The lasting source's surrogate for a source at `pos` ([`latent::surrogate_unshrunk`]: each
-/// channel's noise scaled back to the variance the projections took, before it is randomised;
-/// drawn as the other latent families draw theirs, the chance level sat low enough that on a
-/// network of ten stations in a strip clean `paper` data gave a lasting source in 6 of 60
-/// seeds, 1 with it, for 5 of Akutan's 164 held-out deflations) where it is scored, given back the held view's part beyond these residuals — the main source's moves, as
+/// channel's noise scaled back to the variance the projections took before it is randomised;
+/// drawn without that, as the other latent families draw theirs, the chance level sat so low
+/// that clean `paper` data on a strip of ten stations gave a false lasting source in 6 of 60
+/// seeds, against 1 now, at a price of 5 of Akutan's 164 held-out deflations) where it is
+/// scored, given back the held view's part beyond these residuals — the main source's moves, as
 /// the data hold them, without the daily fit of the source (and the translations) there
 /// ([`GnssResiduals::beside_moves`]): they are what the source is located beside, in the data as
 /// in the draw. Randomised station by station (as the surrogates' flips would), they lose the
