@@ -401,11 +401,11 @@ pub fn surrogate_unshrunk(
     res.with_fit(res.project_rows(&r))
 }
 
-/// Rows `r` (`nc` channels) projected off the orthonormal `removed`, each channel divided by
-/// `√(1 − h)`, `h` its [`leverage`] (at most [`MAX_LEVERAGE`]): noise of equal variance on every
-/// channel keeps `1 − h` of it on a channel once projected, which this gives back — the modified
-/// residuals of the regression bootstrap (Davison & Hinkley 1997, §6.2.3), the projection
-/// being each day's least-squares fit of the removed span.
+/// Rows `r` (`nc` channels; already projected off the orthonormal `removed`) with each channel
+/// divided by `√(1 − h)`, `h` its [`leverage`] under `removed` (at most [`MAX_LEVERAGE`]): noise of
+/// equal variance on every channel keeps `1 − h` of it on a channel once projected, which this
+/// gives back — the modified residuals of the regression bootstrap (Davison & Hinkley 1997,
+/// §6.2.3), the projection being each day's least-squares fit of the removed span.
 pub fn unshrunk(r: &[f64], nc: usize, removed: &[Vec<f64>]) -> Vec<f64> {
     let k: Vec<f64> = leverage(removed, nc)
         .iter()
