@@ -371,11 +371,11 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
     best
 }
 
-/// The lasting source's surrogate for a source at `pos` ([`latent::surrogate_unshrunk`]: each
+/// The lasting source's surrogate for a source at `pos` ([`latent::surrogate`]: each
 /// channel's noise scaled back to the variance the projections took before it is randomised;
-/// drawn without that, as the other latent families draw theirs, the chance level sat so low
-/// that clean `paper` data on a strip of ten stations gave a false lasting source in 6 of 60
-/// seeds, against 1 now, at a price of 5 of Akutan's 164 held-out deflations) where it is
+/// drawn without that, the chance level sat so low that clean `paper` data on a strip of ten
+/// stations gave a false lasting source in 6 of 60 seeds, against 1 with it, at a price of 5 of
+/// Akutan's 164 held-out deflations) where it is
 /// scored, given back the held view's part beyond these residuals — the main source's moves, as
 /// the data hold them, without the daily fit of the source (and the translations) there
 /// ([`GnssResiduals::beside_moves`]): they are what the source is located beside, in the data as
@@ -387,7 +387,7 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
 /// changes of the mean at every station by chance.
 fn surrogate_beside_moves(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
     let without = res.with_fit(pulse::taken_off(res, pulse::beside(res)));
-    let drawn = latent::surrogate_unshrunk(&without, &with_translations(res, pos), rng);
+    let drawn = latent::surrogate(&without, &with_translations(res, pos), rng);
     let Some(held) = res.held.as_deref() else {
         return drawn;
     };

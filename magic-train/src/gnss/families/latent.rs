@@ -369,29 +369,17 @@ pub fn persistent_noise(r: &[f64], nc: usize, g: &[f64], a: &[f64]) -> f64 {
     g.iter().zip(&lag1).map(|(x, l)| x * x * l).sum::<f64>() / ((t_n - 1) as f64 * gg * gg)
 }
 
-/// A latent family's surrogate: the daily fits of `patterns` removed, every station's series
-/// given a random sign and direction of time, projected again.
-pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
-    let nc = res.nc();
-    let (_, r) = split_effect(&res.fit.r, nc, patterns);
-    let r = flip_reverse(&r, nc, res.ns(), rng);
-    res.with_fit(res.project_rows(&r))
-}
-
 /// The largest leverage [`unshrunk`] scales back from: a channel almost inside the removed span
 /// keeps too little of its noise to be scaled back up.
 pub const MAX_LEVERAGE: f64 = 0.9;
 
-/// Like [`surrogate`], each channel's noise first scaled back to the variance the data's hold
-/// ([`unshrunk`]). The data's rows were projected once, off F's tangent and the translations;
+/// A latent family's surrogate: the daily fits of `patterns` removed, each channel's noise scaled
+/// back to the variance the data's hold ([`unshrunk`]), every station's series given a random
+/// sign and direction of time, projected again. The data's rows were projected once, off F's tangent and the translations;
 /// a surrogate's are projected twice, the flipped rows again, so along every pattern beyond that
 /// span they hold less noise than the data (on `paper`-noise clean data, about two-thirds of
 /// its variance), and the chance level comes out low.
-pub fn surrogate_unshrunk(
-    res: &GnssResiduals,
-    patterns: &[Vec<f64>],
-    rng: &mut StdRng,
-) -> GnssResiduals {
+pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
     let nc = res.nc();
     let (_, r) = split_effect(&res.fit.r, nc, patterns);
     let mut cols: Vec<(Vec<f64>, f64)> = res.ctx.tangent.iter().map(|q| (q.clone(), 1.0)).collect();
@@ -433,7 +421,7 @@ pub fn split_effect(r: &[f64], nc: usize, patterns: &[Vec<f64>]) -> (Vec<f64>, V
 }
 
 /// A latent family's bootstrap draw: the daily fits of `patterns` kept, the rest randomised as
-/// for the surrogates ([`surrogate`]) and added back.
+/// for the surrogates (flipped and projected as in [`surrogate`], not scaled back) and added back.
 pub fn resample(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
     let nc = res.nc();
     let (effect, noise) = split_effect(&res.fit.r, nc, patterns);
