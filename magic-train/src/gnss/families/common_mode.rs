@@ -57,7 +57,12 @@ impl Family<GnssResiduals> for CommonMode {
         _: &LatentFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(res, &patterns(res), rng))
+        Ok(latent::surrogate(
+            res,
+            &patterns(res),
+            latent::Spread::Data,
+            rng,
+        ))
     }
     /// The RMS (mm) of the persistent part of each component's daily network mean that the
     /// stations share.

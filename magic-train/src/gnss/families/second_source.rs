@@ -630,6 +630,7 @@ impl Family<GnssResiduals> for SecondSource {
         Ok(latent::surrogate(
             res,
             &with_translations(res, fit.pos),
+            latent::Spread::Projected,
             rng,
         ))
     }
