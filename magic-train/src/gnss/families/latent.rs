@@ -6,9 +6,10 @@
 //! days. A day-to-day white network jitter is noise, not an effect: only a term that persists
 //! from day to day and is shared by the network scores.
 //!
-//! **Chance.** The family's daily fit is removed and each station's series is given a random sign
-//! and direction of time ([`flip_reverse`]: network coherence destroyed, every station's own
-//! series kept whole), then projected again like the residuals themselves.
+//! **Chance.** The family's daily fit is removed, each channel scaled back to the variance the
+//! projection took from it (not for the second source yet: [`Spread`]), and each station's series
+//! is given a random sign and direction of time ([`flip_reverse`]: network coherence destroyed,
+//! every station's own series kept whole), then projected again like the residuals themselves.
 
 use crate::analysis::projection::{leverage, orthonormal};
 use crate::analysis::score::weighted_gain;
