@@ -4,8 +4,9 @@
 //! **Significance.** A family is significant when its score exceeds the chance level (the
 //! [`AnalysisOptions::quantile`](super::AnalysisOptions::quantile) of the surrogate scores,
 //! floored at zero) by more than its margin: the score must pass the surrogates' mean plus
-//! [`SD_MARGIN`] standard deviations on the square-root scale (where noise scores are close to
-//! Gaussian; the raw scores are χ²-like with a heavy tail), and exceed the chance level by at
+//! its family's margin in standard deviations on the square-root scale ([`SD_MARGIN`] unless the
+//! family sets its own: [`Family::sd_margin`](super::Family::sd_margin); noise scores are close
+//! to Gaussian there, the raw scores χ²-like with a heavy tail), and exceed the chance level by at
 //! least [`MIN_EXCESS`] of the residual variance (negligible effects are not worth a model term;
 //! a family whose score is a transient's gain sets its floor in days' worth of residual variance
 //! instead: [`Family::min_excess`](super::Family::min_excess)).
@@ -131,14 +132,17 @@ impl Candidate {
             rejected: None,
             uncertainty: vec![],
         }
-        .with_floor(MIN_EXCESS)
+        .with_rule(MIN_EXCESS, SD_MARGIN)
     }
 
-    /// The candidate judged with `floor` as the least excess over chance that counts (the
-    /// module documentation's rule with `floor` for [`MIN_EXCESS`]; a family whose score is a
-    /// transient's gain sets its own: [`Family::min_excess`](super::Family::min_excess)).
-    pub fn with_floor(mut self, floor: f64) -> Candidate {
-        let t = root_threshold(&self.surrogate_scores, SD_MARGIN);
+    /// The candidate judged with `floor` as the least excess over chance that counts and
+    /// `sd_margin` standard deviations as the margin over the surrogates (the module
+    /// documentation's rule with them for [`MIN_EXCESS`] and [`SD_MARGIN`]; a family whose score
+    /// is a transient's gain sets its own floor, [`Family::min_excess`](super::Family::min_excess),
+    /// a family whose surrogates are drawn otherwise its own margin,
+    /// [`Family::sd_margin`](super::Family::sd_margin)).
+    pub fn with_rule(mut self, floor: f64, sd_margin: f64) -> Candidate {
+        let t = root_threshold(&self.surrogate_scores, sd_margin);
         self.margin = floor.max(t * t - self.chance_level);
         self.significant = self.excess() > self.margin;
         self
@@ -306,6 +310,35 @@ mod tests {
         assert!(strong.significant);
         assert!(strong.margin >= MIN_EXCESS);
         assert!((strong.excess() - (0.2 - strong.chance_level)).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_family_s_own_margin_moves_the_threshold_by_its_deviations() {
+        // Square roots of the surrogate scores: mean 0.1, sample sd 0.02/√3.
+        let noise = vec![
+            0.09f64.powi(2),
+            0.11f64.powi(2),
+            0.09f64.powi(2),
+            0.11f64.powi(2),
+        ];
+        let sd = 0.02 / 3f64.sqrt();
+        let at = |k: f64, score: f64| {
+            Candidate::from_scores("x", score, noise.clone(), 0.95, json!({}), None)
+                .with_rule(0.0, k)
+        };
+        // A score 3.8 deviations out (square-root scale): beyond a margin of 3.5, short of 4.
+        let score = (0.1 + 3.8 * sd).powi(2);
+        assert!(at(3.5, score).significant && !at(SD_MARGIN, score).significant);
+        let (low, high) = (at(3.5, score).margin, at(SD_MARGIN, score).margin);
+        let chance = at(3.5, score).chance_level;
+        assert!(
+            (low + chance - (0.1 + 3.5 * sd).powi(2)).abs() < 1e-12,
+            "{low}"
+        );
+        assert!(
+            (high + chance - (0.1 + 4.0 * sd).powi(2)).abs() < 1e-12,
+            "{high}"
+        );
     }
 
     #[test]

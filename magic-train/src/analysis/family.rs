@@ -9,7 +9,7 @@
 //!
 //! [`Effect`]: magic_core::effects::Effect
 
-use super::{stands_out, AnalysisOptions, Candidate, ParamSd, Rejection, MIN_EXCESS};
+use super::{stands_out, AnalysisOptions, Candidate, ParamSd, Rejection, MIN_EXCESS, SD_MARGIN};
 use crate::model::OwnedEffect;
 use anyhow::Result;
 use rand::rngs::StdRng;
@@ -36,6 +36,12 @@ pub trait Family<R>: Sync {
     /// with the record's length.
     fn min_excess(&self, _res: &R) -> f64 {
         MIN_EXCESS
+    }
+    /// Standard deviations above its surrogates' mean (square-root scale) a fit's score must
+    /// reach ([`SD_MARGIN`] by default). A family whose surrogates' spread is measured otherwise
+    /// sets its own, on seeds other than the reported ones.
+    fn sd_margin(&self) -> f64 {
+        SD_MARGIN
     }
     /// The fit's parameters as reported (JSON).
     fn params(&self, res: &R, fit: &Self::Fit) -> serde_json::Value;
@@ -145,7 +151,7 @@ pub fn judge<R, F: Family<R>>(
         family.params(res, fit),
         family.declare(res, fit),
     )
-    .with_floor(family.min_excess(res));
+    .with_rule(family.min_excess(res), family.sd_margin());
     if let Some(why) = family.reject(res, fit) {
         c.significant = false;
         c.rejected = Some(why);

@@ -57,12 +57,7 @@ impl Family<GnssResiduals> for CommonMode {
         _: &LatentFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(
-            res,
-            &patterns(res),
-            latent::Spread::Data,
-            rng,
-        ))
+        Ok(latent::surrogate(res, &patterns(res), rng))
     }
     /// The RMS (mm) of the persistent part of each component's daily network mean that the
     /// stations share.

@@ -49,12 +49,7 @@ impl Family<GnssResiduals> for Elevation {
         _: &LatentFit,
         rng: &mut StdRng,
     ) -> Result<GnssResiduals> {
-        Ok(latent::surrogate(
-            res,
-            &[pattern(res)],
-            latent::Spread::Data,
-            rng,
-        ))
+        Ok(latent::surrogate(res, &[pattern(res)], rng))
     }
     /// RMS of the daily elevation slope k (mm/km): the daily least-squares amplitude of the
     /// (projected) elevation pattern, its variance less the part the channels' noise puts into

@@ -387,12 +387,7 @@ pub fn fit_at(res: &GnssResiduals, pos: [f64; 3], from: f64, to: f64) -> Lasting
 /// changes of the mean at every station by chance.
 fn surrogate_beside_moves(res: &GnssResiduals, pos: [f64; 3], rng: &mut StdRng) -> GnssResiduals {
     let without = res.with_fit(pulse::taken_off(res, pulse::beside(res)));
-    let drawn = latent::surrogate(
-        &without,
-        &with_translations(res, pos),
-        latent::Spread::Data,
-        rng,
-    );
+    let drawn = latent::surrogate(&without, &with_translations(res, pos), rng);
     let Some(held) = res.held.as_deref() else {
         return drawn;
     };

@@ -7,9 +7,9 @@
 //! from day to day and is shared by the network scores.
 //!
 //! **Chance.** The family's daily fit is removed, each channel scaled back to the variance the
-//! projection took from it (not for the second source yet: [`Spread`]), and each station's series
-//! is given a random sign and direction of time ([`flip_reverse`]: network coherence destroyed,
-//! every station's own series kept whole), then projected again like the residuals themselves.
+//! projection took from it ([`unshrunk`]), and each station's series is given a random sign and
+//! direction of time ([`flip_reverse`]: network coherence destroyed, every station's own series
+//! kept whole), then projected again like the residuals themselves.
 
 use crate::analysis::projection::{leverage, orthonormal};
 use crate::analysis::score::weighted_gain;
@@ -374,39 +374,19 @@ pub fn persistent_noise(r: &[f64], nc: usize, g: &[f64], a: &[f64]) -> f64 {
 /// keeps too little of its noise to be scaled back up.
 pub const MAX_LEVERAGE: f64 = 0.9;
 
-/// The noise a latent family's surrogate holds beyond the removed span.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Spread {
-    /// As much as the data's: each channel scaled back by its leverage first ([`unshrunk`]).
-    Data,
-    /// As the second projection leaves it: about two-thirds of the data's on `paper`-noise clean
-    /// data. Kept for the second source, whose margin was set against such draws (drawn at the
-    /// data's variance with that margin, near pulses under `red` in the training years were lost,
-    /// right but not significant: 9 → 7 of 10 held out); its margin is to be set again first.
-    Projected,
-}
-
 /// A latent family's surrogate: the daily fits of `patterns` removed, each channel's noise scaled
-/// back to the variance the data's hold ([`unshrunk`], with [`Spread::Data`]), every station's
-/// series given a random sign and direction of time, projected again. The data's rows were
-/// projected once, off F's tangent and the translations; a surrogate's are projected twice, the
-/// flipped rows again, so unscaled, along every pattern beyond that span they hold less noise
-/// than the data (on `paper`-noise clean data, about two-thirds of its variance), and the chance
-/// level comes out low.
-pub fn surrogate(
-    res: &GnssResiduals,
-    patterns: &[Vec<f64>],
-    spread: Spread,
-    rng: &mut StdRng,
-) -> GnssResiduals {
+/// back to the variance the data's hold ([`unshrunk`]), every station's series given a random
+/// sign and direction of time, projected again. The data's rows were projected once, off F's
+/// tangent and the translations; a surrogate's are projected twice, the flipped rows again, so
+/// unscaled, along every pattern beyond that span they would hold less noise than the data (on
+/// `paper`-noise clean data, about two-thirds of its variance), and the chance level would come
+/// out low.
+pub fn surrogate(res: &GnssResiduals, patterns: &[Vec<f64>], rng: &mut StdRng) -> GnssResiduals {
     let nc = res.nc();
-    let (_, mut r) = split_effect(&res.fit.r, nc, patterns);
-    if spread == Spread::Data {
-        let mut cols: Vec<(Vec<f64>, f64)> =
-            res.ctx.tangent.iter().map(|q| (q.clone(), 1.0)).collect();
-        cols.extend(patterns.iter().map(|q| (q.clone(), 1.0)));
-        r = unshrunk(&r, nc, &orthonormal(&cols, 1e-9, 2));
-    }
+    let (_, r) = split_effect(&res.fit.r, nc, patterns);
+    let mut cols: Vec<(Vec<f64>, f64)> = res.ctx.tangent.iter().map(|q| (q.clone(), 1.0)).collect();
+    cols.extend(patterns.iter().map(|q| (q.clone(), 1.0)));
+    let r = unshrunk(&r, nc, &orthonormal(&cols, 1e-9, 2));
     let r = flip_reverse(&r, nc, res.ns(), rng);
     res.with_fit(res.project_rows(&r))
 }
