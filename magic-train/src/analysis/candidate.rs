@@ -100,7 +100,7 @@ pub fn stands_out(stat: f64, of_surrogates: &[f64]) -> bool {
 
 /// The mean plus `k` standard deviations of the square roots of `values` (negatives as 0): the
 /// scale on which chance scores and statistics are close to Gaussian.
-fn root_threshold(values: &[f64], k: f64) -> f64 {
+pub(super) fn root_threshold(values: &[f64], k: f64) -> f64 {
     let roots: Vec<f64> = values.iter().map(|v| v.max(0.0).sqrt()).collect();
     roots.iter().sum::<f64>() / roots.len().max(1) as f64 + k * sd(&roots)
 }

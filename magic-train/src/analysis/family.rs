@@ -9,7 +9,9 @@
 //!
 //! [`Effect`]: magic_core::effects::Effect
 
-use super::{stands_out, AnalysisOptions, Candidate, ParamSd, Rejection, MIN_EXCESS, SD_MARGIN};
+use super::{
+    stands_out, AnalysisOptions, Candidate, HeldPart, ParamSd, Rejection, MIN_EXCESS, SD_MARGIN,
+};
 use crate::model::OwnedEffect;
 use anyhow::Result;
 use rand::rngs::StdRng;
@@ -51,6 +53,29 @@ pub trait Family<R>: Sync {
     /// its search grid is not a discovery), if it cannot.
     fn reject(&self, _res: &R, _fit: &Self::Fit) -> Option<Rejection> {
         None
+    }
+    /// The part of the data the fit rests on most (a source's station holding most of its field)
+    /// and the fit's score with it held out entirely ([`Family::score_without`]), where that
+    /// part's share is large enough to ask the rest to confirm the fit ([`HeldPart`]); `None`
+    /// for a family without parts, or where no part holds that much.
+    fn held_part(&self, _res: &R, _fit: &Self::Fit) -> Option<HeldPart> {
+        None
+    }
+    /// The score of `fit` (any fit: a surrogate's own too) with `part` held out entirely.
+    fn score_without(&self, _res: &R, _fit: &Self::Fit, _part: &HeldPart) -> f64 {
+        0.0
+    }
+    /// A surrogate that keeps `part` as `res` holds it and randomises the rest as
+    /// [`Family::surrogate`] does: the null under which the fit is that part's own motion
+    /// ([`HeldPart`]).
+    fn surrogate_keeping(
+        &self,
+        res: &R,
+        fit: &Self::Fit,
+        _part: &HeldPart,
+        rng: &mut StdRng,
+    ) -> Result<R> {
+        self.surrogate(res, fit, rng)
     }
     /// A detection statistic of the fit (larger: stronger) that must also exceed every
     /// surrogate's (unless it only supports: [`statistic_vetoes`](Family::statistic_vetoes)),
@@ -120,9 +145,17 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
                 Ok((self.score(&f), self.statistic(&f)))
             })
             .collect::<Result<Vec<(f64, Option<f64>)>>>()?;
-        let chance = surrogates.iter().map(|s| s.0).collect();
-        let of_surrogates = surrogates.iter().filter_map(|s| s.1).collect();
-        let mut c = judge(self, res, &fit, chance, of_surrogates, opts.quantile);
+        let mut chance = Chance {
+            scores: surrogates.iter().map(|s| s.0).collect(),
+            statistics: surrogates.iter().filter_map(|s| s.1).collect(),
+            held_part: None,
+        };
+        let mut c = judge(self, res, &fit, chance.clone(), opts.quantile);
+        // A fit one part holds most of, otherwise significant: the rest must confirm it.
+        if let Some(part) = self.held_part(res, &fit).filter(|_| c.significant) {
+            chance.held_part = Some(held_chance(self, res, &fit, &part, opts)?);
+            c = judge(self, res, &fit, chance, opts.quantile);
+        }
         if c.significant && opts.bootstrap > 0 {
             c.uncertainty = bootstrap(self, res, &fit, opts)?;
         }
@@ -130,23 +163,36 @@ impl<R: Sync, F: Family<R>> DynFamily<R> for F {
     }
 }
 
-/// A fit of `family` to `res` judged against its surrogates' scores (`chance`) and detection
-/// statistics (`of_surrogates`) by the family's rules — its score's margin over chance, its
-/// rejections, its detection statistic ([`Family::statistic`]): the candidate
+/// What the surrogates give a family's fit by chance ([`judge`]).
+#[derive(Clone, Debug, Default)]
+pub struct Chance {
+    /// Their scores, each of its own fit.
+    pub scores: Vec<f64>,
+    /// Their detection statistics ([`Family::statistic`]; empty for a family without one).
+    pub statistics: Vec<f64>,
+    /// Where the fit has a [`Family::held_part`]: each surrogate's score without that part
+    /// ([`Family::surrogate_keeping`], fitted anew), which the fit's must pass (empty: it cannot
+    /// be confirmed); `None` where they were not drawn, and the part is not judged.
+    pub held_part: Option<Vec<f64>>,
+}
+
+/// A fit of `family` to `res` judged against its surrogates' scores, detection statistics and
+/// held-part scores (`chance`) by the family's rules — its score's margin over chance, its
+/// rejections, its detection statistic ([`Family::statistic`]), the rest of the data's
+/// confirmation where one part holds most of it ([`Family::held_part`]): the candidate
 /// [`DynFamily::assess`] returns, before the bootstrap. Any fit can be judged so, a synthetic
 /// truth's too (`gnss::recovery::at_truth`).
 pub fn judge<R, F: Family<R>>(
     family: &F,
     res: &R,
     fit: &F::Fit,
-    chance: Vec<f64>,
-    of_surrogates: Vec<f64>,
+    chance: Chance,
     quantile: f64,
 ) -> Candidate {
     let mut c = Candidate::from_scores(
         family.name(),
         family.score(fit),
-        chance,
+        chance.scores,
         quantile,
         family.params(res, fit),
         family.declare(res, fit),
@@ -157,9 +203,43 @@ pub fn judge<R, F: Family<R>>(
         c.rejected = Some(why);
     }
     if let Some(stat) = family.statistic(fit) {
-        with_statistic(&mut c, stat, of_surrogates, family.statistic_vetoes());
+        with_statistic(&mut c, stat, chance.statistics, family.statistic_vetoes());
+    }
+    if let Some(held) = family.held_part(res, fit) {
+        let margin = family.sd_margin();
+        let of_surrogates = chance.held_part.as_deref();
+        if let Some(p) = c.params.as_object_mut() {
+            p.insert("held_out".into(), held.to_json(of_surrogates, margin));
+        }
+        let why = of_surrogates.and_then(|v| held.rejection(v, margin));
+        if let (None, Some(why)) = (&c.rejected, why) {
+            c.significant = false;
+            c.rejected = Some(why);
+        }
     }
     c
+}
+
+/// The chance of a held part's score ([`Chance::held_part`]): `opts.surrogates` surrogates
+/// keeping the part ([`Family::surrogate_keeping`]), each fitted anew and scored without it, on
+/// a stream of seeds of their own.
+fn held_chance<R: Sync, F: Family<R>>(
+    family: &F,
+    res: &R,
+    fit: &F::Fit,
+    part: &HeldPart,
+    opts: &AnalysisOptions,
+) -> Result<Vec<f64>> {
+    let name = format!("{}/held_part", family.name());
+    surrogate_seeds(opts.seed, &name, opts.surrogates.max(2))
+        .par_iter()
+        .map(|s| {
+            let mut rng = StdRng::seed_from_u64(*s);
+            let sur = family.surrogate_keeping(res, fit, part, &mut rng)?;
+            let f = family.fit(&sur)?;
+            Ok(family.score_without(&sur, &f, part))
+        })
+        .collect()
 }
 
 /// Judges a scored candidate `c` by its family's detection statistic `stat` against the

@@ -10,13 +10,15 @@
 
 mod candidate;
 mod family;
+mod held_part;
 pub mod projection;
 mod rejection;
 pub mod score;
 pub mod surrogate;
 
 pub use candidate::{rank, stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
-pub use family::{judge, surrogate_seeds, DynFamily, Family};
+pub use family::{judge, surrogate_seeds, Chance, DynFamily, Family};
+pub use held_part::HeldPart;
 pub use rejection::{Rejection, Side};
 
 use crate::data::SplitName;

@@ -69,14 +69,19 @@ pub enum Rejection {
         least_angle: f64,
     },
     /// A source one station sees alone: most of its pattern at that station, whose own motion
-    /// (a step, a settling monument) it stands for.
+    /// (a step, a settling monument) it stands for, and the other stations do not confirm it
+    /// ([`HeldPart`](super::HeldPart)).
     OneStation {
         /// The station.
         station: String,
         /// The share of the pattern's energy it holds.
         share: f64,
-        /// The largest share accepted.
+        /// The largest share accepted without the other stations confirming it.
         most: f64,
+        /// The source's score on the other stations alone (share of the residual variance).
+        without: f64,
+        /// The score they had to pass (NaN: no surrogates to judge them by).
+        needed: f64,
     },
     /// Its fit over the whole record, the one F would take, adds nothing (a drift whose
     /// held-out fits each found a station in part of the record, though no station's rate
@@ -159,11 +164,21 @@ impl fmt::Display for Rejection {
                 station,
                 share,
                 most,
-            } => write!(
-                f,
-                "seen by one station: {station} holds {share:.2} of its field's energy (at most \
-                 {most:.2} for a source)"
-            ),
+                without,
+                needed,
+            } => {
+                write!(
+                    f,
+                    "seen by one station: {station} holds {share:.2} of its field's energy (more \
+                     than {most:.2}) and the other stations alone explain {without:.4} of the \
+                     residual variance, "
+                )?;
+                if needed.is_nan() {
+                    f.write_str("with no surrogates to judge them by")
+                } else {
+                    write!(f, "{needed:.4} needed")
+                }
+            }
             Rejection::NothingToAdd(why) => write!(f, "nothing to add: {why}"),
             Rejection::PartOf(why) => f.write_str(why),
         }
@@ -221,12 +236,25 @@ mod tests {
             station: "AKLV".into(),
             share: 0.912,
             most: 0.75,
+            without: 0.0003,
+            needed: 0.0011,
         };
         assert_eq!(one.bound(), None);
         assert_eq!(
             one.to_string(),
-            "seen by one station: AKLV holds 0.91 of its field's energy (at most 0.75 for a source)"
+            "seen by one station: AKLV holds 0.91 of its field's energy (more than 0.75) and the \
+             other stations alone explain 0.0003 of the residual variance, 0.0011 needed"
         );
+        let unjudged = Rejection::OneStation {
+            station: "AKLV".into(),
+            share: 0.912,
+            most: 0.75,
+            without: 0.0003,
+            needed: f64::NAN,
+        };
+        assert!(unjudged
+            .to_string()
+            .ends_with("0.0003 of the residual variance, with no surrogates to judge them by"));
     }
 
     #[test]

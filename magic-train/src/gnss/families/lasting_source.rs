@@ -37,13 +37,13 @@
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid_at, located_draw, on_bound, one_station, pattern,
-    position_params, refine, resample_at, resolvable, station_share, translations, unresolvable,
-    with_translations, MIN_RESOLVABLE,
+    declare_at, distinct_best, grid_at, held_station, keeping_station, located_draw, on_bound,
+    pattern, position_params, refine, resample_at, resolvable, station_share, translations,
+    unresolvable, with_translations, without_station, MIN_RESOLVABLE,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
-use crate::analysis::{Family, Rejection};
+use crate::analysis::{Family, HeldPart, Rejection};
 use crate::gnss::residuals::SourceGrid;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
@@ -498,9 +498,30 @@ impl Family<GnssResiduals> for LastingSource {
     }
     fn reject(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<Rejection> {
         let loc = res.locating();
-        on_bound(&lasting_grid(loc).points, fit.pos)
-            .or_else(|| unresolvable(loc, fit.pos))
-            .or_else(|| one_station(loc, fit.pos))
+        on_bound(&lasting_grid(loc).points, fit.pos).or_else(|| unresolvable(loc, fit.pos))
+    }
+    /// Seen mostly by one station ([`held_station`]).
+    fn held_part(&self, res: &GnssResiduals, fit: &LastingFit) -> Option<HeldPart> {
+        held_station(res.locating(), fit.pos, |p| self.score_without(res, fit, p))
+    }
+    /// The change at the fit's onset on the other stations alone, beside the pulse it was
+    /// searched beside.
+    fn score_without(&self, res: &GnssResiduals, fit: &LastingFit, part: &HeldPart) -> f64 {
+        let loc = res.locating();
+        let (g, ts) = without_station(loc, fit.pos, part.index);
+        let r = pulse::taken_off(loc, pulse::beside(res));
+        lasting_gain(&g, &ts, &Prefix::new(&r, loc.nc()), loc.ns(), fit.onset)
+            / loc.ctx.total_fit.max(1e-300)
+    }
+    fn surrogate_keeping(
+        &self,
+        res: &GnssResiduals,
+        fit: &LastingFit,
+        part: &HeldPart,
+        rng: &mut StdRng,
+    ) -> Result<GnssResiduals> {
+        let sur = self.surrogate(res, fit, rng)?;
+        Ok(keeping_station(res, sur, part.index))
     }
     /// Position, and the depth's natural logarithm: the depth's error grows with the depth, and
     /// found depths lie shallow of the truth more often than deep (README, *Blind spots*), so its

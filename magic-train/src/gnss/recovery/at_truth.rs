@@ -8,7 +8,7 @@
 //! not the same.)
 
 use super::{Found, Recovery};
-use crate::analysis::{judge, AnalysisOptions, Candidate, Family};
+use crate::analysis::{judge, AnalysisOptions, Candidate, Chance, Family};
 use crate::gnss::families::lasting_source::{fit_at, LastingSource};
 use crate::gnss::synth::truth::Injected;
 use crate::gnss::GnssResiduals;
@@ -49,18 +49,18 @@ pub fn lasting(
     let family = LastingSource;
     let own = candidates.iter().find(|c| c.family == family.name())?;
     let fit = fit_at(res, pos, from as f64, to as f64);
-    let of_surrogates = own
+    let statistics = own
         .statistic
         .as_ref()
         .map_or_else(Vec::new, |s| s.1.clone());
-    let c = judge(
-        &family,
-        res,
-        &fit,
-        own.surrogate_scores.clone(),
-        of_surrogates,
-        opts.quantile,
-    );
+    // The candidate's surrogates were not scored at the truth without its dominant station: a
+    // truth one station holds most of is not confirmed here.
+    let chance = Chance {
+        scores: own.surrogate_scores.clone(),
+        statistics,
+        held_part: Some(Vec::new()),
+    };
+    let c = judge(&family, res, &fit, chance, opts.quantile);
     Some(AtTruth {
         score: fit.score,
         chance: c.chance_level,

@@ -111,16 +111,22 @@ fn beside_main_source(
 }
 
 /// A source right under a station, shallow, is seen by that station alone (one station's
-/// three components cannot place a point source): rejected, for either source family, where
-/// the same source deeper is not.
+/// three components cannot place a point source): for either source family it counts only
+/// where the other stations confirm it, where the same source deeper needs no confirmation.
+/// Scored on the others alone, a change that stays at that station by itself gains nothing; the
+/// same change along the source's whole field does.
 #[test]
-fn a_shallow_source_under_one_station_is_that_station() {
-    use crate::analysis::{Family, Rejection};
+fn a_shallow_source_under_one_station_needs_the_others_to_confirm_it() {
+    use crate::analysis::Family;
     use crate::gnss::families::lasting_source::{LastingFit, LastingSource};
-    use crate::gnss::families::second_source::{station_share, MAX_STATION_SHARE};
+    use crate::gnss::families::second_source::{
+        pattern, station_share, SecondSource, SourceFit, MAX_STATION_SHARE,
+    };
     let (network, scale, main, span) = akutan_main_source();
-    let rows = vec![vec![0.0; scale.len()]; 10];
-    let res = beside_main_source(&network, &scale, main, span, &rows);
+    let nc = scale.len();
+    let ns = network.names.len();
+    let flat = vec![vec![0.0; nc]; 10];
+    let res = beside_main_source(&network, &scale, main, span.clone(), &flat);
     // The station farthest from the main source, where little of a field is a move of it.
     let far = |s: &magic_core::mogi::Station| (s.x_km - main[0]).hypot(s.y_km - main[1]);
     let (i, st) = (network.stations.iter().enumerate())
@@ -132,26 +138,46 @@ fn a_shallow_source_under_one_station_is_that_station() {
     assert!(share > MAX_STATION_SHARE, "{share}");
     let deep = station_share(&res, under(4.0)).1;
     assert!(deep < MAX_STATION_SHARE, "{deep}");
-    let fit = |pos| LastingFit {
+    let lasting = |pos, onset| LastingFit {
         pos,
+        onset,
         ..LastingFit::default()
     };
-    let one = |r: Option<Rejection>| matches!(r, Some(Rejection::OneStation { station, .. }) if station == network.names[i]);
-    assert!(one(LastingSource.reject(&res, &fit(under(1.25)))));
-    assert!(!one(LastingSource.reject(&res, &fit(under(4.0)))));
-    // A second source is held to it when found (its grid stops at 2 km: shallower is on the
-    // bound), not in its search (`rejection`), where it would move the surrogates' fits too.
-    use crate::gnss::families::second_source::{SecondSource, SourceFit};
-    let found = |pos| {
-        SecondSource.reject(
-            &res,
-            &SourceFit {
-                pos,
-                ..SourceFit::default()
-            },
-        )
+    let second = |pos| SourceFit {
+        pos,
+        window: 30,
+        ..SourceFit::default()
     };
-    assert!(!one(found(under(4.0))));
+    let held = LastingSource.held_part(&res, &lasting(under(1.25), 5));
+    assert_eq!(held.map(|h| h.part), Some(network.names[i].clone()));
+    assert!(LastingSource
+        .held_part(&res, &lasting(under(4.0), 5))
+        .is_none());
+    assert!(SecondSource.held_part(&res, &second(under(4.0))).is_none());
+    // A change from day 300 of 600 along the shallow source's field, at its station only or
+    // at every station, over a little noise.
+    let g = pattern(&res, under(1.25));
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut rows = |only: bool| -> Vec<Vec<f64>> {
+        (0..600)
+            .map(|t| {
+                (0..nc)
+                    .map(|c| {
+                        let on = (t >= 300 && (!only || c % ns == i)) as u8 as f64;
+                        on * g[c] + 0.01 * (rand::Rng::random::<f64>(&mut rng) - 0.5)
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let mut without = |only: bool| {
+        let res = beside_main_source(&network, &scale, main, span.clone(), &rows(only));
+        let h = LastingSource.held_part(&res, &lasting(under(1.25), 300));
+        h.expect("one station holds most of the field").score
+    };
+    let (alone, whole) = (without(true), without(false));
+    assert!(whole > 0.01, "{whole}");
+    assert!(alone < 1e-3 * whole, "{alone} against {whole}");
 }
 
 /// A source's resolvable share (`second_source::resolvable`): none at the main source itself
