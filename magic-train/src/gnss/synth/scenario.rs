@@ -24,6 +24,9 @@ pub enum Distance {
     Near,
     /// 6–12 km from it, within the network's box ± 2 km.
     Far,
+    /// Within 1 km (horizontally) of a station at least 5 km from it, 1.5–2.5 km deep: a
+    /// source that station sees most of.
+    UnderStation,
 }
 
 /// One injected effect.
@@ -92,6 +95,8 @@ impl Injection {
                 (Shape::Lasting, Distance::Near) => 9,
                 (Shape::Lasting, Distance::Far) => 10,
                 (Shape::Lasting, Distance::Apart) => 11,
+                (Shape::Lasting, Distance::UnderStation) => 13,
+                (Shape::Pulse, Distance::UnderStation) => 14,
             },
             Injection::Drift => 6,
             Injection::StepElsewhere => 12,
@@ -161,6 +166,10 @@ pub enum Scenario {
     LastingDeflationNear,
     /// The same 6–12 km from the main source (within the network's box ± 2 km).
     LastingDeflationFar,
+    /// A shallow lasting deflation (1.5–2.5 km deep) within 1 km of a station at least 5 km
+    /// from the main source, moving that station 20–40 mm (building over 2–4 months, then
+    /// staying): a source one station sees most of, the others a few mm.
+    LastingDeflationUnderStation,
     /// `step` and `elevation` together.
     #[value(name = "step+elevation")]
     StepElevation,
@@ -187,7 +196,7 @@ const PULSE: Injection = Injection::SecondSource {
 
 impl Scenario {
     /// Every scenario, `clean` first, then the single effects, then two effects at once.
-    pub const ALL: [Scenario; 16] = [
+    pub const ALL: [Scenario; 17] = [
         Scenario::Clean,
         Scenario::CommonMode,
         Scenario::Seasonal,
@@ -199,6 +208,7 @@ impl Scenario {
         Scenario::SecondSourceFar,
         Scenario::LastingDeflationNear,
         Scenario::LastingDeflationFar,
+        Scenario::LastingDeflationUnderStation,
         Scenario::StepElevation,
         Scenario::SecondSourceStep,
         Scenario::CommonModeSeasonal,
@@ -220,6 +230,7 @@ impl Scenario {
             Scenario::SecondSourceFar => "second_source_far",
             Scenario::LastingDeflationNear => "lasting_deflation_near",
             Scenario::LastingDeflationFar => "lasting_deflation_far",
+            Scenario::LastingDeflationUnderStation => "lasting_deflation_under_station",
             Scenario::StepElevation => "step+elevation",
             Scenario::SecondSourceStep => "second_source+step",
             Scenario::CommonModeSeasonal => "common_mode+seasonal",
@@ -243,6 +254,9 @@ impl Scenario {
             Scenario::SecondSourceFar => vec![source(Shape::Pulse, Distance::Far)],
             Scenario::LastingDeflationNear => vec![source(Shape::Lasting, Distance::Near)],
             Scenario::LastingDeflationFar => vec![source(Shape::Lasting, Distance::Far)],
+            Scenario::LastingDeflationUnderStation => {
+                vec![source(Shape::Lasting, Distance::UnderStation)]
+            }
             Scenario::StepElevation => vec![Injection::Step, Injection::Elevation],
             Scenario::SecondSourceStep => vec![PULSE, Injection::Step],
             Scenario::CommonModeSeasonal => vec![Injection::CommonMode, Injection::Seasonal],

@@ -3,6 +3,7 @@
 
 use super::inject::second_source::{
     course, network_box, MIN_RESOLVABLE, MIN_RESOLVABLE_NEAR, MIN_VISIBLE_MM,
+    UNDER_STATION_APART_KM, UNDER_STATION_MM,
 };
 use super::truth::{background, injected, Injected};
 use super::*;
@@ -283,6 +284,58 @@ fn a_step_is_where_and_when_the_truth_says() {
                     }
                 }
             }
+        }
+    }
+}
+
+/// A source under a station: within 1 km of a station far enough from the main source,
+/// 1.5–2.5 km deep, moving that station by the stated range at its final volume, from a start
+/// in the placement's period.
+#[test]
+fn a_source_under_a_station_moves_that_station_most() {
+    let network = Network::akutan();
+    let ns = network.len();
+    for noise in NoiseModel::ALL {
+        for placement in SPLITS {
+            let spec = Spec::new(Scenario::LastingDeflationUnderStation, 4)
+                .noise(noise)
+                .placed(placement);
+            let truth = spec.generate().truth;
+            let p = &injected(&truth)[0].params;
+            let what = format!("{noise:?} {placement}");
+            let num = |k: &str| p[k].as_f64().unwrap();
+            let pos = [num("x_km"), num("y_km"), num("depth_km")];
+            let near = |s: &magic_core::mogi::Station| (s.x_km - pos[0]).hypot(s.y_km - pos[1]);
+            let (i, st) = (network.stations.iter().enumerate())
+                .min_by(|a, b| near(a.1).total_cmp(&near(b.1)))
+                .unwrap();
+            assert!(
+                near(st) <= 1.0,
+                "{what}: {} km from {}",
+                near(st),
+                network.names[i]
+            );
+            let apart = (st.x_km - SOURCE[0]).hypot(st.y_km - SOURCE[1]);
+            assert!(apart >= UNDER_STATION_APART_KM, "{what}: {apart} km");
+            assert!((1.5..=2.5).contains(&pos[2]), "{what}: {} km deep", pos[2]);
+            let mut u = vec![0.0; 3 * ns];
+            let dv = num("peak_dv_1e6m3");
+            magic_core::mogi::field(&network.stations, &[pos[0], pos[1], pos[2], dv], &mut u)
+                .unwrap();
+            let norm = |j: usize| (0..3).map(|k| u[k * ns + j].powi(2)).sum::<f64>().sqrt();
+            let most = (0..ns).map(norm).fold(0.0, f64::max);
+            // The peak ΔV is stated to four decimals.
+            let [lo, hi] = UNDER_STATION_MM;
+            assert!(
+                dv < 0.0 && most >= lo - 0.1 && most <= hi + 0.1,
+                "{what}: {most} mm"
+            );
+            let layout = noise.layout();
+            assert!(in_period(
+                &layout,
+                placement,
+                date_row(&layout, &p["start"])
+            ));
         }
     }
 }

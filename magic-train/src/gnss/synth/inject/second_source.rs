@@ -5,12 +5,14 @@
 //!   6–9 mm (network RMS at the peak) of its field beyond what moving the main source can mimic,
 //!   at most 30 mm at any station;
 //! - a *lasting* deflation: ΔV −0.8 to −1.1·10⁶ m³, building over 60–120 days (raised cosine)
-//!   and then staying, seen by at least one station ([`MIN_VISIBLE_MM`]).
+//!   and then staying, seen by at least one station ([`MIN_VISIBLE_MM`]); *under a station*, the
+//!   ΔV that moves that station 20–40 mm ([`UNDER_STATION_MM`]).
 //!
 //! Its position: at least 5 km from the main source anywhere over the network, 4–8 km deep (the
 //! original scenario); 2–4 km from it (*near*), 3–4 km deep; or 6–12 km from it within the
-//! network's box ± 2 km (*far*), 4–8 km deep for a pulse and 3–4 km for a lasting change. Its
-//! start lies in the placement's period.
+//! network's box ± 2 km (*far*), 4–8 km deep for a pulse and 3–4 km for a lasting change; or
+//! within 1 km of a station at least [`UNDER_STATION_APART_KM`] from it, 1.5–2.5 km deep
+//! (*under a station*: the station sees most of it). Its start lies in the placement's period.
 //!
 //! Resolvable: a near source is mostly what the main source, moved a little, would produce —
 //! within 4 km of it at most about 40 % of a 3–4 km deep source's field (in norm) is beyond the
@@ -37,6 +39,11 @@ const MAX_DRAWS: usize = 100_000;
 /// Smallest displacement (mm, norm at the most displaced station) of a lasting deflation at its
 /// final volume.
 pub const MIN_VISIBLE_MM: f64 = 8.0;
+/// Displacement (mm, norm) of the station a source *under a station* lies under, at its final
+/// volume: drawn in this range.
+pub const UNDER_STATION_MM: [f64; 2] = [20.0, 40.0];
+/// Least distance (km) from the main source of the station a source lies under.
+pub const UNDER_STATION_APART_KM: f64 = 5.0;
 /// Margin (km) around the network's box within which a far source lies.
 pub const BOX_MARGIN_KM: f64 = 2.0;
 
@@ -131,6 +138,26 @@ fn position(
                 rng.random_range(ctx.apart_box[2]..ctx.apart_box[3]),
                 rng.random_range(4.0..8.0),
             ],
+            Distance::UnderStation => {
+                let apart: Vec<&Station> = (stations.iter())
+                    .filter(|s| {
+                        (s.x_km - ctx.main[0]).hypot(s.y_km - ctx.main[1]) >= UNDER_STATION_APART_KM
+                    })
+                    .collect();
+                if apart.is_empty() {
+                    bail!(
+                        "no station {UNDER_STATION_APART_KM} km or more from the main source for \
+                         a source under a station"
+                    );
+                }
+                let s = apart[rng.random_range(0..apart.len())];
+                let (r, th): (f64, f64) = (rng.random_range(0.0..1.0), rng.random_range(0.0..TAU));
+                [
+                    s.x_km + r * th.cos(),
+                    s.y_km + r * th.sin(),
+                    rng.random_range(1.5..2.5),
+                ]
+            }
             Distance::Near | Distance::Far => {
                 let (lo, hi) = if distance == Distance::Near {
                     (2.0, 4.0)
@@ -203,6 +230,15 @@ pub fn inject(
             let dur = rng.random_range(200..500usize.min(len - 201));
             let start = rng.random_range(p0 + 100..p1 - 100 - dur);
             (p, peak, start, dur)
+        }
+        Shape::Lasting if distance == Distance::UnderStation => {
+            let (p, _) = position(ctx, rng, shape, distance, &|_| true)?;
+            let umax = (station_norms(stations, p, 1.0).iter()).fold(0.0f64, |a, b| a.max(*b));
+            let peak = -rng.random_range(UNDER_STATION_MM[0]..UNDER_STATION_MM[1]) / umax;
+            let rise = rng.random_range(60..=120usize);
+            let margin = len / 10;
+            let start = rng.random_range(p0 + margin..p1 - margin - rise);
+            (p, peak, start, rise)
         }
         Shape::Lasting => {
             let peak = -rng.random_range(0.8..1.1);
