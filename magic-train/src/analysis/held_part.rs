@@ -52,7 +52,7 @@ impl HeldPart {
             return None;
         }
         let needed = self.needed(chance, sd_margin);
-        let confirmed = needed.is_some_and(|n| self.score > n.max(0.0) && self.score > 0.0);
+        let confirmed = needed.is_some_and(|n| self.score > n.max(0.0));
         (!confirmed).then(|| Rejection::OneStation {
             station: self.part.clone(),
             share: self.share,

@@ -543,10 +543,10 @@ pub(super) fn without_station(
 /// ([`GnssResiduals::locating`]), as `res` holds them: the null of that station's own motion,
 /// the other stations' noise drawn.
 pub(super) fn keeping_station(res: &GnssResiduals, sur: GnssResiduals, i: usize) -> GnssResiduals {
-    let (nc, ns, data) = (res.nc(), res.ns(), &res.locating().fit.r);
+    let (ns, data) = (res.ns(), &res.locating().fit.r);
     let kept = |rows: &[f64]| -> Vec<f64> {
         (rows.iter().zip(data).enumerate())
-            .map(|(c, (v, d))| if c % nc % ns == i { *d } else { *v })
+            .map(|(c, (v, d))| if c % ns == i { *d } else { *v })
             .collect()
     };
     match sur.held.clone() {

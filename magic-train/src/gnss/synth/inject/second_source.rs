@@ -131,6 +131,16 @@ fn position(
     } else {
         MIN_RESOLVABLE
     };
+    // The stations a source under a station may lie under.
+    let apart: Vec<&Station> = (stations.iter())
+        .filter(|s| (s.x_km - ctx.main[0]).hypot(s.y_km - ctx.main[1]) >= UNDER_STATION_APART_KM)
+        .collect();
+    if distance == Distance::UnderStation && apart.is_empty() {
+        bail!(
+            "no station {UNDER_STATION_APART_KM} km or more from the main source for a source \
+             under a station"
+        );
+    }
     for _ in 0..MAX_DRAWS {
         let p = match distance {
             Distance::Apart => [
@@ -139,17 +149,6 @@ fn position(
                 rng.random_range(4.0..8.0),
             ],
             Distance::UnderStation => {
-                let apart: Vec<&Station> = (stations.iter())
-                    .filter(|s| {
-                        (s.x_km - ctx.main[0]).hypot(s.y_km - ctx.main[1]) >= UNDER_STATION_APART_KM
-                    })
-                    .collect();
-                if apart.is_empty() {
-                    bail!(
-                        "no station {UNDER_STATION_APART_KM} km or more from the main source for \
-                         a source under a station"
-                    );
-                }
                 let s = apart[rng.random_range(0..apart.len())];
                 let (r, th): (f64, f64) = (rng.random_range(0.0..1.0), rng.random_range(0.0..TAU));
                 [
@@ -231,23 +230,23 @@ pub fn inject(
             let start = rng.random_range(p0 + 100..p1 - 100 - dur);
             (p, peak, start, dur)
         }
-        Shape::Lasting if distance == Distance::UnderStation => {
-            let (p, _) = position(ctx, rng, shape, distance, &|_| true)?;
-            let umax = (station_norms(stations, p, 1.0).iter()).fold(0.0f64, |a, b| a.max(*b));
-            let peak = -rng.random_range(UNDER_STATION_MM[0]..UNDER_STATION_MM[1]) / umax;
-            let rise = rng.random_range(60..=120usize);
-            let margin = len / 10;
-            let start = rng.random_range(p0 + margin..p1 - margin - rise);
-            (p, peak, start, rise)
-        }
         Shape::Lasting => {
-            let peak = -rng.random_range(0.8..1.1);
-            let visible = |q: [f64; 3]| {
-                station_norms(stations, q, peak)
-                    .iter()
-                    .any(|v| *v >= MIN_VISIBLE_MM)
+            let (p, peak) = if distance == Distance::UnderStation {
+                let (p, _) = position(ctx, rng, shape, distance, &|_| true)?;
+                let umax = (station_norms(stations, p, 1.0).iter()).fold(0.0f64, |a, b| a.max(*b));
+                (
+                    p,
+                    -rng.random_range(UNDER_STATION_MM[0]..UNDER_STATION_MM[1]) / umax,
+                )
+            } else {
+                let peak = -rng.random_range(0.8..1.1);
+                let visible = |q: [f64; 3]| {
+                    station_norms(stations, q, peak)
+                        .iter()
+                        .any(|v| *v >= MIN_VISIBLE_MM)
+                };
+                (position(ctx, rng, shape, distance, &visible)?.0, peak)
             };
-            let (p, _) = position(ctx, rng, shape, distance, &visible)?;
             let rise = rng.random_range(60..=120usize);
             let margin = len / 10;
             let start = rng.random_range(p0 + margin..p1 - margin - rise);
