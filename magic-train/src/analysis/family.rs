@@ -67,7 +67,8 @@ pub trait Family<R>: Sync {
     }
     /// A surrogate that keeps `part` as `res` holds it and randomises the rest as
     /// [`Family::surrogate`] does: the null under which the fit is that part's own motion
-    /// ([`HeldPart`]).
+    /// ([`HeldPart`]). [`Family::fit`] on it must search among the fits that part holds most
+    /// of, as the data's fit is one.
     fn surrogate_keeping(
         &self,
         res: &R,
@@ -171,8 +172,9 @@ pub struct Chance {
     /// Their detection statistics ([`Family::statistic`]; empty for a family without one).
     pub statistics: Vec<f64>,
     /// Where the fit has a [`Family::held_part`]: each surrogate's score without that part
-    /// ([`Family::surrogate_keeping`], fitted anew), which the fit's must pass (empty: it cannot
-    /// be confirmed); `None` where they were not drawn, and the part is not judged.
+    /// ([`Family::surrogate_keeping`], fitted anew among the fits it holds most of), which the
+    /// fit's must pass (empty: it cannot be confirmed); `None` where they were not drawn, and
+    /// the part is not judged.
     pub held_part: Option<Vec<f64>>,
 }
 

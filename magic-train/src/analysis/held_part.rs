@@ -4,10 +4,12 @@
 //! (neither fitted on nor predicted), it must stand out by the family's margin
 //! ([`Family::sd_margin`](super::Family::sd_margin), on the square-root scale as the score's
 //! rule) of the same score on surrogates that keep the part as the data hold it and randomise
-//! the rest ([`Family::surrogate_keeping`](super::Family::surrogate_keeping)), each fitted anew:
-//! the null of the part's own motion, the search's choice of the fit included. (Scored at the
-//! data's fit instead, without a search, the surrogates left that choice out: on trial seeds
-//! 101–105, 5 of 22 fits one station held passed, none of them a source to find.)
+//! the rest ([`Family::surrogate_keeping`](super::Family::surrogate_keeping)), each fitted anew
+//! among the fits that part holds most of: the null of the part's own motion, the search's
+//! choice of the fit included. (Scored at the data's fit instead, without a search, the
+//! surrogates left that choice out: on trial seeds 101–105, 5 of 22 fits one station held
+//! passed, none of them a source to find. Searched anywhere, their fits went where the other
+//! stations hold more of them, and the score to pass was any fit's chance level.)
 
 use super::candidate::root_threshold;
 use super::Rejection;

@@ -149,6 +149,11 @@ pub struct GnssResiduals {
     /// `fit.r`): kept for the data's own residuals, `None` for a draw. A term that follows the
     /// calendar is fitted with it given back ([`GnssResiduals::given_back`]).
     pub taken: Option<Arc<Vec<f64>>>,
+    /// A draw that keeps this station's rows as the data hold them (the null of a source that
+    /// station holds most of): its sources are searched among those the station holds most of
+    /// ([`second_source::held_by`](crate::gnss::families::second_source::held_by)). `None` for
+    /// the data and every other draw.
+    pub kept: Option<usize>,
 }
 
 impl GnssResiduals {
@@ -185,6 +190,7 @@ impl GnssResiduals {
             },
             held: None,
             taken: None,
+            kept: None,
         }
     }
 
@@ -551,6 +557,7 @@ fn view(shared: &Shared<'_>, rows: &[Vec<f64>], tangent: Vec<Vec<f64>>) -> GnssR
         fit,
         held: None,
         taken: Some(Arc::new(taken)),
+        kept: None,
     }
 }
 

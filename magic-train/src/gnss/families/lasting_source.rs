@@ -37,9 +37,9 @@
 
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid_at, held_station, keeping_station, located_draw, on_bound,
-    pattern, position_params, refine, resample_at, resolvable, station_share, translations,
-    unresolvable, with_translations, without_station, MIN_RESOLVABLE,
+    declare_at, distinct_best, grid_at, held_by, held_station, keeping_station, located_draw,
+    nearest, on_bound, pattern, position_params, refine, resample_at, resolvable, station_share,
+    translations, unresolvable, with_translations, without_station, MIN_RESOLVABLE,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
@@ -207,20 +207,6 @@ fn argmax(v: impl Iterator<Item = (f64, usize)>) -> (f64, usize) {
     v.fold((f64::MIN, 0), |b, x| if x.0 > b.0 { x } else { b })
 }
 
-/// The grid point of `pts` nearest `pos` (in 3-D) where `admissible` holds, if any (the
-/// first in grid order among equally near ones). Points are tried nearest first, so that
-/// `admissible` — a field and its projection — is not evaluated over the whole grid.
-fn nearest(
-    pts: &[[f64; 3]],
-    pos: [f64; 3],
-    admissible: &dyn Fn([f64; 3]) -> bool,
-) -> Option<[f64; 3]> {
-    let d2 = |p: &[f64; 3]| (0..3).map(|k| (p[k] - pos[k]).powi(2)).sum::<f64>();
-    let mut by_distance: Vec<&[f64; 3]> = pts.iter().collect();
-    by_distance.sort_by(|a, b| d2(a).total_cmp(&d2(b)));
-    by_distance.into_iter().copied().find(|p| admissible(*p))
-}
-
 /// The candidates of a table of the statistic (`table[point][epoch]`, grid points `pts`) as
 /// `(statistic, point, epoch)`: the [`CANDIDATES`] best distinct points, each at its best
 /// epoch; then, per epoch, the point where the statistic is largest, and of these the
@@ -275,7 +261,8 @@ fn candidates(
 /// epoch, and the best grid point of each of the few epochs where it gains most (a change
 /// elsewhere in time — the main source's own episodes — must not hide one weaker at its onset);
 /// each refined at its epoch by its [`lasting_gain`], the one with the largest kept. The gain,
-/// like the offsets, on the held view.
+/// like the offsets, on the held view. Refined where a move of the main source cannot mimic it
+/// and, in a draw that keeps a station, where that station holds most of it ([`held_by`]).
 fn search(res: &GnssResiduals) -> LastingFit {
     let ns = res.ns();
     let loc = res.locating();
@@ -299,7 +286,7 @@ fn search(res: &GnssResiduals) -> LastingFit {
     let gain_of = |g: &[f64], onset: usize| lasting_gain(g, &ts, &pre, ns, onset);
     let gain = |pos: [f64; 3], onset: usize| gain_of(&pattern(loc, pos), onset);
     // Where the field is not mostly a move of the main source.
-    let admissible = |p: [f64; 3]| resolvable(loc, p) >= MIN_RESOLVABLE;
+    let admissible = |p: [f64; 3]| resolvable(loc, p) >= MIN_RESOLVABLE && held_by(loc, p);
     let mut best: Option<LastingFit> = None;
     for (_, pi, k) in candidates(&table, pts, |pi, k| gain(pts[pi], d[k].0)) {
         let (onset, de) = &d[k];
@@ -308,7 +295,8 @@ fn search(res: &GnssResiduals) -> LastingFit {
         let (mut pos, mut score) = refine(loc, pts, pts[pi], start, &score_at, &|_| true);
         // Refined to where a move mimics it (as a near source located deep of the truth is),
         // refined again from the nearest admissible grid point, within that region: the
-        // resolvable point beside it fits nearly as well.
+        // resolvable point beside it fits nearly as well. (In a draw that keeps a station, the
+        // same where that station does not hold most of it.)
         if !admissible(pos) {
             if let Some(q) = nearest(pts, pos, &admissible) {
                 (pos, score) = refine(loc, pts, q, gain(q, *onset), &score_at, &admissible);

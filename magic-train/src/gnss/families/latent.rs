@@ -277,20 +277,55 @@ pub fn loso_daily(
 /// `min_blocks` of them, up to the whole record) of day-by-day `(Σ r·p, Σ p²)`: the gain of a
 /// transient judged where it happens rather than diluted over the whole record.
 pub fn best_interval_gain(daily: &[(f64, f64)], block: usize, min_blocks: usize) -> f64 {
+    best_interval(daily, block, min_blocks).0
+}
+
+/// [`best_interval_gain`] and the rows of its interval (the first of equal gains; the whole
+/// record when nothing gains).
+///
+/// ```
+/// use magic_train::gnss::families::latent::best_interval;
+/// let mut daily = vec![(-1.0, 1.0); 6];
+/// daily[2] = (3.0, 1.0);
+/// daily[3] = (3.0, 1.0);
+/// let (gain, rows) = best_interval(&daily, 2, 1);
+/// assert_eq!(rows, 2..4);
+/// assert!((gain - 18.0).abs() < 1e-12);
+/// ```
+pub fn best_interval(
+    daily: &[(f64, f64)],
+    block: usize,
+    min_blocks: usize,
+) -> (f64, std::ops::Range<usize>) {
+    let block = block.max(1);
     let mut pre = vec![(0.0, 0.0)];
-    for ch in daily.chunks(block.max(1)) {
+    for ch in daily.chunks(block) {
         let last = *pre.last().unwrap_or(&(0.0, 0.0));
         let (a, b) = ch.iter().fold((0.0, 0.0), |s, d| (s.0 + d.0, s.1 + d.1));
         pre.push((last.0 + a, last.1 + b));
     }
     let nb = pre.len() - 1;
-    let mut best = 0.0f64;
+    let mut best = (0.0f64, 0..daily.len());
     for a in 0..nb {
         for b in a + min_blocks.clamp(1, nb.max(1))..=nb {
-            best = best.max(weighted_gain((pre[b].0 - pre[a].0, pre[b].1 - pre[a].1)));
+            let g = weighted_gain((pre[b].0 - pre[a].0, pre[b].1 - pre[a].1));
+            if g > best.0 {
+                best = (g, a * block..(b * block).min(daily.len()));
+            }
         }
     }
     best
+}
+
+/// The [`weighted_gain`] of day-by-day `(Σ r·p, Σ p²)` over the rows `rows` (those the record
+/// holds).
+pub fn interval_gain(daily: &[(f64, f64)], rows: std::ops::Range<usize>) -> f64 {
+    let rows = rows.start.min(daily.len())..rows.end.min(daily.len());
+    weighted_gain(
+        daily[rows]
+            .iter()
+            .fold((0.0, 0.0), |s, d| (s.0 + d.0, s.1 + d.1)),
+    )
 }
 
 /// The leave-one-station-out gain of pattern `g`.

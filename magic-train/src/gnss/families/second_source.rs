@@ -152,6 +152,32 @@ pub fn station_share(res: &GnssResiduals, p: [f64; 3]) -> (usize, f64) {
         .fold((0, 0.0), |b, x| if x.1 > b.1 { x } else { b })
 }
 
+/// Whether a source at `pos` may be the fit of `res`: anywhere, but in a draw that keeps a
+/// station as the data hold it ([`GnssResiduals::kept`]) only where that station holds more
+/// than [`MAX_STATION_SHARE`] of it ([`station_share`]) — the kind of fit the draw is the null
+/// of. Searched anywhere, the draws' fits went where the other stations hold more of them, and
+/// their scores without the station were those of any source's chance level.
+pub fn held_by(res: &GnssResiduals, pos: [f64; 3]) -> bool {
+    res.kept.is_none_or(|i| {
+        let (j, share) = station_share(res, pos);
+        j == i && share > MAX_STATION_SHARE
+    })
+}
+
+/// The grid point of `pts` nearest `pos` (in 3-D) where `admissible` holds, if any (the
+/// first in grid order among equally near ones). Points are tried nearest first, so that
+/// `admissible` — a field and its projection — is not evaluated over the whole grid.
+pub(super) fn nearest(
+    pts: &[[f64; 3]],
+    pos: [f64; 3],
+    admissible: &dyn Fn([f64; 3]) -> bool,
+) -> Option<[f64; 3]> {
+    let d2 = |p: &[f64; 3]| (0..3).map(|k| (p[k] - pos[k]).powi(2)).sum::<f64>();
+    let mut by_distance: Vec<&[f64; 3]> = pts.iter().collect();
+    by_distance.sort_by(|a, b| d2(a).total_cmp(&d2(b)));
+    by_distance.into_iter().copied().find(|p| admissible(*p))
+}
+
 /// The field of a unit volume change at `p` in standardised units, unprojected (`None` where
 /// Mogi's field is undefined).
 fn unit_field(res: &GnssResiduals, p: [f64; 3]) -> Option<Vec<f64>> {
@@ -318,7 +344,9 @@ pub(super) fn distinct_best(
 /// trace of) is still located where it happens. The candidate whose leave-one-station-out gain
 /// over its best interval of days ([`latent::best_interval_gain`]) is largest wins — of those no
 /// rule rejects, if any: a candidate on the grid's bound or mostly a move of the main source is
-/// no discovery, and must not hide one that may be. `res` is the view the source is located and
+/// no discovery, and must not hide one that may be. In a draw that keeps a station, a candidate is
+/// moved to the nearest grid point that station holds most of and refined among those
+/// ([`held_by`]). `res` is the view the source is located and
 /// scored on ([`GnssResiduals::locating`]); `xs` are its windows. The surrogates are searched
 /// the same way, so chance has as many tries as the data.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
@@ -342,14 +370,15 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             .map(|(pi, g)| (latent::persistent_along(g, x), pi))
             .collect();
         for (q0, pi) in distinct_best(scored, pts, k) {
-            let (pos, _) = refine(
-                res,
-                pts,
-                pts[pi],
-                q0,
-                &|g| latent::persistent_along(g, x),
-                &|_| true,
-            );
+            let along = |g: &[f64]| latent::persistent_along(g, x);
+            let (mut pos, _) = refine(res, pts, pts[pi], q0, &along, &|_| true);
+            // In a draw that keeps a station, moved to the fits that station holds most of.
+            let within = |p: [f64; 3]| held_by(res, p);
+            if !within(pos) {
+                if let Some(q) = nearest(pts, pos, &within) {
+                    pos = refine(res, pts, q, along(&pattern(res, q)), &along, &within).0;
+                }
+            }
             if once {
                 if tried
                     .iter()
@@ -361,7 +390,7 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             }
             let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
-            let ok = rejection(res, pos).is_none();
+            let ok = rejection(res, pos).is_none() && held_by(res, pos);
             if (ok, gain) > (best.0, best.1.score) {
                 best = (
                     ok,
@@ -549,14 +578,18 @@ pub(super) fn keeping_station(res: &GnssResiduals, sur: GnssResiduals, i: usize)
             .map(|(c, (v, d))| if c % ns == i { *d } else { *v })
             .collect()
     };
-    match sur.held.clone() {
+    let mut out = match sur.held.clone() {
         Some(held) => {
+            let mut held = held.with_fit(kept(&held.fit.r));
+            held.kept = Some(i);
             let mut out = sur;
-            out.held = Some(std::sync::Arc::new(held.with_fit(kept(&held.fit.r))));
+            out.held = Some(std::sync::Arc::new(held));
             out
         }
         None => sur.with_fit(kept(&sur.fit.r)),
-    }
+    };
+    out.kept = Some(i);
+    out
 }
 
 /// Why a second source at `pos` is no discovery where it is located (`res`), if it is not: on
@@ -736,15 +769,20 @@ impl Family<GnssResiduals> for SecondSource {
     fn held_part(&self, res: &GnssResiduals, fit: &SourceFit) -> Option<HeldPart> {
         held_station(res.locating(), fit.pos, |p| self.score_without(res, fit, p))
     }
-    /// Over its best interval, with the fit's window, on the other stations alone.
+    /// On the other stations alone, with the fit's window, over the interval of days where the
+    /// fit gains most with every station — where the station that holds most of it moves: the
+    /// others confirm the source there, not over an interval of their own choosing (where a
+    /// pulse elsewhere would confirm any source whose field reaches it).
     fn score_without(&self, res: &GnssResiduals, fit: &SourceFit, part: &HeldPart) -> f64 {
         let loc = res.locating();
         let (ns, nc) = (loc.ns(), loc.nc());
-        let (g, ts) = without_station(loc, fit.pos, part.index);
         let r = latent::highpass(&loc.fit.r, nc, latent::LATENT_HIGHPASS_DAYS);
+        let all = pattern(loc, fit.pos);
+        let all = latent::loso_daily(&all, &translations(loc), &r, nc, ns, fit.window);
+        let (_, days) = latent::best_interval(&all, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
+        let (g, ts) = without_station(loc, fit.pos, part.index);
         let daily = latent::loso_daily(&g, &ts, &r, nc, ns, fit.window);
-        latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS)
-            / loc.ctx.total_fit.max(1e-300)
+        latent::interval_gain(&daily, days) / loc.ctx.total_fit.max(1e-300)
     }
     fn surrogate_keeping(
         &self,
