@@ -346,7 +346,7 @@ pub(super) fn distinct_best(
 /// rule rejects, if any: a candidate on the grid's bound or mostly a move of the main source is
 /// no discovery, and must not hide one that may be. In a draw that keeps a station, a candidate is
 /// moved to the nearest grid point that station holds most of and refined among those
-/// ([`held_by`]). `res` is the view the source is located and
+/// ([`held_by`]), and such a candidate beats every other. `res` is the view the source is located and
 /// scored on ([`GnssResiduals::locating`]); `xs` are its windows. The surrogates are searched
 /// the same way, so chance has as many tries as the data.
 fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
@@ -358,9 +358,10 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
         patterns,
         ..
     } = grid(res);
-    // (admissible, fit): a candidate no rule rejects ([`rejection`]) beats one a rule does,
-    // whatever their gains.
-    let mut best = (false, SourceFit::default());
+    // ((within, admissible), fit): a candidate no rule rejects ([`rejection`]) beats one a rule
+    // does, whatever their gains; in a draw that keeps a station, one that station holds most of
+    // ([`held_by`]) beats one it does not, admissible or not.
+    let mut best = ((res.kept.is_none(), false), SourceFit::default());
     // Positions the intervals' search has scored (the intervals overlap: each is scored once).
     let mut tried: Vec<[f64; 3]> = Vec::new();
     let mut consider = |x: &Cross, w: usize, k: usize, once: bool| {
@@ -390,10 +391,10 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
             }
             let daily = latent::loso_daily(&pattern(res, pos), &ts, &r, nc, ns, w);
             let gain = latent::best_interval_gain(&daily, INTERVAL_BLOCK_DAYS, INTERVAL_MIN_BLOCKS);
-            let ok = rejection(res, pos).is_none() && held_by(res, pos);
-            if (ok, gain) > (best.0, best.1.score) {
+            let key = (held_by(res, pos), rejection(res, pos).is_none());
+            if (key, gain) > (best.0, best.1.score) {
                 best = (
-                    ok,
+                    key,
                     SourceFit {
                         pos,
                         window: w,
