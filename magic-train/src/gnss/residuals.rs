@@ -151,7 +151,7 @@ pub struct GnssResiduals {
     pub taken: Option<Arc<Vec<f64>>>,
     /// A draw that keeps this station's rows as the data hold them (the null of a source that
     /// station holds most of): its sources are searched among those the station holds most of
-    /// ([`second_source::held_by`](crate::gnss::families::second_source::held_by)). `None` for
+    /// ([`held_station::held_by`](crate::gnss::families::held_station::held_by)). `None` for
     /// the data and every other draw.
     pub kept: Option<usize>,
 }

@@ -35,11 +35,11 @@
 //! above chance significant, as a step's does; unlike a step's, it never rejects a score beyond
 //! its margin.
 
+use super::held_station::{held_by, held_station, keeping_station, station_share, without_station};
 use super::latent::{self, round3, Prefix};
 use super::second_source::{
-    declare_at, distinct_best, grid_at, held_by, held_station, keeping_station, located_draw,
-    nearest, on_bound, pattern, position_params, refine, resample_at, resolvable, station_share,
-    translations, unresolvable, with_translations, without_station, MIN_RESOLVABLE,
+    declare_at, distinct_best, grid_at, located_draw, nearest, on_bound, pattern, position_params,
+    refine, resample_at, resolvable, translations, unresolvable, with_translations, MIN_RESOLVABLE,
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;

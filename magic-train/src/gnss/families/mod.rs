@@ -10,6 +10,7 @@ pub mod dated;
 pub mod drift;
 pub mod drifting;
 pub mod elevation;
+pub mod held_station;
 pub mod lasting_source;
 pub mod latent;
 pub mod onset;

@@ -118,10 +118,9 @@ fn beside_main_source(
 #[test]
 fn a_shallow_source_under_one_station_needs_the_others_to_confirm_it() {
     use crate::analysis::Family;
+    use crate::gnss::families::held_station::{station_share, MAX_STATION_SHARE};
     use crate::gnss::families::lasting_source::{LastingFit, LastingSource};
-    use crate::gnss::families::second_source::{
-        pattern, station_share, SecondSource, SourceFit, MAX_STATION_SHARE,
-    };
+    use crate::gnss::families::second_source::{pattern, SecondSource, SourceFit};
     let (network, scale, main, span) = akutan_main_source();
     let nc = scale.len();
     let ns = network.names.len();
@@ -615,7 +614,7 @@ fn no_source_is_taken_across_a_declared_one_the_main_source_trades_with() {
 /// it, not the same deeper nor one under another station; the data admit every source.
 #[test]
 fn a_draw_keeping_a_station_is_searched_among_the_sources_it_holds_most_of() {
-    use crate::gnss::families::second_source::held_by;
+    use crate::gnss::families::held_station::held_by;
     let (network, scale, main, span) = akutan_main_source();
     let flat = vec![vec![0.0; scale.len()]; 10];
     let res = beside_main_source(&network, &scale, main, span, &flat);
