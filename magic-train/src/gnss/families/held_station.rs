@@ -49,9 +49,11 @@ pub fn held_by(res: &GnssResiduals, pos: [f64; 3]) -> bool {
 /// The station a source at `pos` is seen by most, where it holds more than
 /// [`MAX_STATION_SHARE`] of the source's pattern ([`station_share`]), with the source's score
 /// without it (`score_without`): such a source is that station's own motion unless the others
-/// confirm it ([`HeldPart`]). Judged on the found source only, not in the search: there it would
-/// move the surrogates' fits, too, to places several stations see, where they score higher, and
-/// raise the chance level every source is judged against.
+/// confirm it ([`HeldPart`]). Judged on the found source only, not in the search of the data and
+/// its ordinary surrogates: there it would move the surrogates' fits, too, to places several
+/// stations see, where they score higher, and raise the chance level every source is judged
+/// against. (Only a draw that keeps a station is searched by share, [`held_by`]: it is the null
+/// of such a source.)
 pub fn held_station(
     res: &GnssResiduals,
     pos: [f64; 3],
