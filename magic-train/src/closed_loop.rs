@@ -227,7 +227,7 @@ impl std::fmt::Display for StopReason {
                     );
                 }
                 let has = |names: &[&str]| beyond_capacity.iter().any(|x| names.contains(&&**x));
-                if has(&["second_source", "lasting_source"]) {
+                if has(&crate::gnss::families::SOURCES) {
                     write!(f, " (another point source needs a larger --extra-sources)")?;
                 }
                 if has(&["step"]) {

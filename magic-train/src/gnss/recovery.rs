@@ -249,7 +249,7 @@ fn drift(tp: &serde_json::Value, p: &serde_json::Value) -> (bool, String) {
 pub fn compare(family: &str, tp: &serde_json::Value, p: &serde_json::Value) -> (bool, String) {
     match family {
         "step" => step(tp, p),
-        "second_source" | "lasting_source" => second_source(tp, p),
+        f if crate::gnss::families::is_source(f) => second_source(tp, p),
         "elevation" => elevation(tp, p),
         "common_mode" => common_mode(tp, p),
         "seasonal" => seasonal(tp, p),
@@ -274,7 +274,7 @@ fn assign(effects: &[Injected], ranked: &[&Candidate]) -> Vec<Option<usize>> {
             taken[i] = (0..ranked.len()).find(|&k| {
                 let c = ranked[k];
                 c.significant
-                    && (c.family == e.family) == own
+                    && same_family(&c.family, &e.family) == own
                     && same_effect(&c.family, &e.family)
                     && !taken.contains(&Some(k))
                     && compare(&e.family, &e.params, &c.params).0
@@ -291,7 +291,11 @@ fn found(e: &Injected, ranked: &[&Candidate], given: Option<usize>, taken: &[usi
     let declares = |c: &&Candidate| c.significant && same_effect(&c.family, &e.family);
     let pos = given
         .or_else(|| ranked.iter().position(declares))
-        .or_else(|| ranked.iter().position(|c| c.family == e.family));
+        .or_else(|| {
+            ranked
+                .iter()
+                .position(|c| same_family(&c.family, &e.family))
+        });
     let Some(c) = pos.map(|i| ranked[i]) else {
         return Found {
             family: e.family.clone(),
@@ -323,11 +327,18 @@ fn found(e: &Injected, ranked: &[&Candidate], given: Option<usize>, taken: &[usi
 }
 
 /// Whether two families declare the same term of F: a second source found as an episode
-/// (`second_source`) or as a change that stays (`lasting_source`) is the same source, so one
-/// found beside the other injected is not a false addition.
+/// (`second_source`) or as a change that stays (`lasting_source`, `recent_source`) is the same
+/// source, so one found beside the other injected is not a false addition.
 pub fn same_effect(a: &str, b: &str) -> bool {
-    let source = |f: &str| f == "second_source" || f == "lasting_source";
-    a == b || (source(a) && source(b))
+    use crate::gnss::families::is_source;
+    a == b || (is_source(a) && is_source(b))
+}
+
+/// Whether two families are one search: a change that stays, looked for over the whole record
+/// (`lasting_source`) or over its last year (`recent_source`), is found by either as its own.
+pub fn same_family(a: &str, b: &str) -> bool {
+    use crate::gnss::families::is_lasting;
+    a == b || (is_lasting(a) && is_lasting(b))
 }
 
 /// Compares an analysis's candidates (ranked, as [`Analysis::effects`]) with a truth of

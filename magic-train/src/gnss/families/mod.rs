@@ -29,7 +29,8 @@ pub fn all() -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
         Box::new(elevation::Elevation),
         Box::new(step::Step),
         Box::new(second_source::SecondSource),
-        Box::new(lasting_source::LastingSource),
+        Box::new(lasting_source::LastingSource::WHOLE),
+        Box::new(lasting_source::LastingSource::RECENT),
         Box::new(drift::Drift),
     ]
 }
@@ -37,6 +38,20 @@ pub fn all() -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
 /// The names of [`all`], in report order.
 pub fn names() -> Vec<&'static str> {
     all().iter().map(|f| f.name()).collect()
+}
+
+/// The families that find a point source (a pulse, a change that stays anywhere in the record
+/// or in its last year): each declares the same term of F, a second source.
+pub const SOURCES: [&str; 3] = ["second_source", "lasting_source", "recent_source"];
+
+/// Whether `family` finds a point source ([`SOURCES`]).
+pub fn is_source(family: &str) -> bool {
+    SOURCES.contains(&family)
+}
+
+/// Whether `family` finds a change that stays (`lasting_source`, `recent_source`).
+pub fn is_lasting(family: &str) -> bool {
+    is_source(family) && family != "second_source"
 }
 
 /// `YYYY-MM-DD` of a day number (rounded).

@@ -103,7 +103,7 @@ pub fn mark_onsets(network: &Network, effects: &mut [Candidate]) {
         }
         let why = effects[..i]
             .iter()
-            .filter(|s| s.family == "lasting_source" && s.significant && s.rejected.is_none())
+            .filter(|s| super::is_lasting(&s.family) && s.significant && s.rejected.is_none())
             .filter(|s| s.excess() > c.excess())
             .filter_map(Change::of)
             .find_map(|ch| onset_of(network, &ch, station.into(), epoch_day.into(), offset_mm));

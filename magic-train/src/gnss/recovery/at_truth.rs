@@ -1,5 +1,6 @@
 //! A lasting change judged at its truth: the lasting-source family's fit at the injected
-//! source's position, its onset the best scanned epoch within the true change ([`fit_at`]),
+//! source's position, its onset the best scanned epoch within the true change ([`fit_at`];
+//! over the whole record and, for a change in the last year, over that year),
 //! judged by the family's rules against the surrogates the analysis drew for its own
 //! candidate. A miss is then the data's (not significant at the truth either: no search under
 //! this score would find it), the score's (significant there, but another place scores
@@ -38,7 +39,10 @@ impl AtTruth {
 
 /// The truth of `e`, an injected lasting change (a source of shape `lasting`), judged
 /// in the residuals `res` beside the analysis's `candidates`; `None` for any other effect, or
-/// when the analysis has no lasting-source candidate to take the surrogates from.
+/// when the analysis has no lasting-source candidate to take the surrogates from. Judged by
+/// [`LastingSource::WHOLE`] and, when the change lies within the record's last year, by
+/// [`LastingSource::RECENT`] too: significant by either (the one that is, else the whole
+/// record's verdict).
 pub fn lasting(
     res: &GnssResiduals,
     e: &Injected,
@@ -46,9 +50,29 @@ pub fn lasting(
     opts: &AnalysisOptions,
 ) -> Option<AtTruth> {
     let (pos, from, to) = lasting_truth(e)?;
-    let family = LastingSource;
+    let window = (from as f64, to as f64);
+    let whole = judged(LastingSource::WHOLE, res, pos, window, candidates, opts);
+    let recent = judged(LastingSource::RECENT, res, pos, window, candidates, opts);
+    match (whole, recent) {
+        (Some(w), Some(r)) if r.significant && !w.significant => Some(r),
+        (None, r) => r,
+        (w, _) => w,
+    }
+}
+
+/// The truth at `pos`, its change between the days of `window`, judged by `family` against the
+/// surrogates of that family's candidate; `None` without that candidate, or when the family
+/// scans no onset within the window ([`LastingSource::RECENT`] outside the last year).
+fn judged(
+    family: LastingSource,
+    res: &GnssResiduals,
+    pos: [f64; 3],
+    window: (f64, f64),
+    candidates: &[Candidate],
+    opts: &AnalysisOptions,
+) -> Option<AtTruth> {
     let own = candidates.iter().find(|c| c.family == family.name())?;
-    let fit = fit_at(res, pos, from as f64, to as f64);
+    let fit = fit_at(family, res, pos, window, family == LastingSource::RECENT)?;
     let statistics = own
         .statistic
         .as_ref()

@@ -235,6 +235,36 @@ fn a_source_found_as_the_other_time_course_is_found() {
 }
 
 #[test]
+fn a_change_found_in_the_last_year_is_the_lasting_family_ranked_first() {
+    let src = json!({"x_km": 4.0, "y_km": -2.0, "depth_km": 3.5});
+    let truth = json!({"scenario": "lasting_deflation_far", "noise": "paper",
+        "placement": "valid", "effects": [{"family": "lasting_source", "params": src}],
+        "background": []});
+    // Found by both searches, the last year's ranked first: found, first, nothing false.
+    let r = recovery(
+        &truth,
+        &[
+            cand("recent_source", true, src.clone()),
+            cand("lasting_source", true, src.clone()),
+            cand("second_source", false, src.clone()),
+        ],
+    );
+    assert!(r.ok() && r.effects[0].rank == Some(1), "{r:?}");
+    assert!(r.false_additions.is_empty(), "{r:?}");
+    assert!(same_family("recent_source", "lasting_source"));
+    assert!(!same_family("second_source", "lasting_source"));
+    // A pulse ranked above it is still not the family ranked first.
+    let r = recovery(
+        &truth,
+        &[
+            cand("second_source", true, src.clone()),
+            cand("recent_source", true, src),
+        ],
+    );
+    assert!(r.all_found() && !r.ok(), "{r:?}");
+}
+
+#[test]
 fn one_candidate_recovers_one_of_two_injected_sources() {
     let at = |x: f64, y: f64| json!({"x_km": x, "y_km": y, "depth_km": 4.0});
     let truth = json!({"scenario": "second_source+lasting_source", "noise": "red",

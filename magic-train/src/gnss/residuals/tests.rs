@@ -147,9 +147,9 @@ fn a_shallow_source_under_one_station_needs_the_others_to_confirm_it() {
         window: 30,
         ..SourceFit::default()
     };
-    let held = LastingSource.held_part(&res, &lasting(under(1.25), 5));
+    let held = LastingSource::WHOLE.held_part(&res, &lasting(under(1.25), 5));
     assert_eq!(held.map(|h| h.part), Some(network.names[i].clone()));
-    assert!(LastingSource
+    assert!(LastingSource::WHOLE
         .held_part(&res, &lasting(under(4.0), 5))
         .is_none());
     assert!(SecondSource.held_part(&res, &second(under(4.0))).is_none());
@@ -171,7 +171,7 @@ fn a_shallow_source_under_one_station_needs_the_others_to_confirm_it() {
     };
     let mut without = |only: bool| {
         let res = beside_main_source(&network, &scale, main, span.clone(), &rows(only));
-        let h = LastingSource.held_part(&res, &lasting(under(1.25), 300));
+        let h = LastingSource::WHOLE.held_part(&res, &lasting(under(1.25), 300));
         h.expect("one station holds most of the field").score
     };
     let (alone, whole) = (without(true), without(false));
@@ -211,7 +211,7 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
         pos,
         ..LastingFit::default()
     };
-    let lasting = |pos: [f64; 3]| LastingSource.reject(&res, &fit(pos));
+    let lasting = |pos: [f64; 3]| LastingSource::WHOLE.reject(&res, &fit(pos));
     let beside = lasting([main[0], main[1] + 3.0, main[2]]);
     assert!(
         matches!(beside, Some(Rejection::Unresolvable { .. })),
@@ -272,13 +272,13 @@ fn the_lasting_source_is_located_where_a_move_cannot_mimic_it() {
         .collect();
     let res = beside_main_source(&network, &scale, main, span, &rows);
     assert!(resolvable(&res, beside) < MIN_RESOLVABLE);
-    let fit = LastingSource.fit(&res).unwrap();
+    let fit = LastingSource::WHOLE.fit(&res).unwrap();
     assert!(
         resolvable(&res, fit.pos) >= MIN_RESOLVABLE,
         "located at {:?}",
         fit.pos
     );
-    let why = LastingSource.reject(&res, &fit);
+    let why = LastingSource::WHOLE.reject(&res, &fit);
     assert!(
         !matches!(why, Some(Rejection::Unresolvable { .. })),
         "{why:?}"

@@ -75,6 +75,24 @@ fn offsets_reach_the_records_last_months_at_equal_noise() {
 }
 
 #[test]
+fn the_recent_family_scans_the_last_year_only() {
+    // 1 000 days, one channel, a day missing every 10th day: the whole family scans every
+    // epoch, the recent one those within RECENT_DAYS of the last day (by date, not by row).
+    let days: Vec<f64> = (0..1100).filter(|d| d % 10 != 9).map(f64::from).collect();
+    let r = vec![0.0; days.len()];
+    let whole = LastingSource::WHOLE.epochs(&r, 1, &days);
+    let recent = LastingSource::RECENT.epochs(&r, 1, &days);
+    assert_eq!(whole.len(), offsets(&r, 1).len());
+    let last = days[days.len() - 1];
+    let within = |t: usize| last - days[t] <= RECENT_DAYS;
+    let expected: Vec<usize> = whole.iter().map(|e| e.0).filter(|&t| within(t)).collect();
+    assert_eq!(recent.iter().map(|e| e.0).collect::<Vec<_>>(), expected);
+    assert!(!expected.is_empty() && expected.len() < whole.len());
+    assert_eq!(LastingSource::WHOLE.name(), "lasting_source");
+    assert_eq!(LastingSource::RECENT.name(), "recent_source");
+}
+
+#[test]
 fn shared_offsets_ignore_one_stations_own_jump() {
     // Three stations, two components (channel c of station c % 3).
     let ns = 3;
@@ -260,7 +278,7 @@ fn search_finds_a_noise_free_change_where_it_is() {
                 .unwrap();
         let loc = res.locating();
         let alone = change_alone(&with.problem, &clean.problem, loc);
-        let fit = search(&alone);
+        let fit = search(&alone, LastingSource::WHOLE);
         let truth = &with.truth["effects"][0]["params"];
         let t = ["x_km", "y_km", "depth_km"].map(|k| truth[k].as_f64().unwrap());
         // At the truth, within its window, the family scores as its search's best does.
@@ -270,7 +288,14 @@ fn search_finds_a_noise_free_change_where_it_is() {
                 .and_then(magic_core::time::parse_date)
                 .unwrap() as f64
         };
-        let at = fit_at(&alone, t, day("start"), day("end"));
+        let at = fit_at(
+            LastingSource::WHOLE,
+            &alone,
+            t,
+            (day("start"), day("end")),
+            false,
+        )
+        .unwrap();
         let onset = alone.locating().fit.days[at.onset];
         assert!(
             (day("start")..=day("end")).contains(&onset)
