@@ -361,14 +361,13 @@ fn search(res: &GnssResiduals, family: LastingSource) -> LastingFit {
 /// scanned epoch to their middle when none lies between; score and statistic as the search
 /// gives them. At a synthetic change's true position and window, it is what the family would
 /// score had its search found the truth: a miss whose truth scores below chance is the data's,
-/// not the search's (`magic synth-check`). `None` when the family scans no epoch at all, or
-/// (`within` true) none between `from` and `to`.
+/// not the search's (`magic synth-check`). `None` when the family scans no epoch at all, or,
+/// kept to the record's last days ([`LastingSource::RECENT`]), none between `from` and `to`.
 pub fn fit_at(
     family: LastingSource,
     res: &GnssResiduals,
     pos: [f64; 3],
     (from, to): (f64, f64),
-    within: bool,
 ) -> Option<LastingFit> {
     let (ns, loc) = (res.ns(), res.locating());
     let r = pulse::taken_off(loc, pulse::beside(res));
@@ -378,18 +377,18 @@ pub fn fit_at(
         .iter()
         .filter(|(t, _)| (from..=to).contains(&day(*t)))
         .collect();
-    if inside.is_empty() && !within {
+    if inside.is_empty() && family.within_days.is_none() {
         let mid = 0.5 * (from + to);
         inside.extend(
             d.iter()
                 .min_by(|a, b| (day(a.0) - mid).abs().total_cmp(&(day(b.0) - mid).abs())),
         );
     }
-    let (g, ts) = (pattern(loc, pos), translations(loc));
-    let pre = Prefix::new(&r, loc.nc());
     if inside.is_empty() {
         return None;
     }
+    let (g, ts) = (pattern(loc, pos), translations(loc));
+    let pre = Prefix::new(&r, loc.nc());
     let mut best = LastingFit::default();
     for (i, (onset, de)) in inside.into_iter().enumerate() {
         let score = lasting_gain(&g, &ts, &pre, ns, *onset);

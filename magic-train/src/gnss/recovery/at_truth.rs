@@ -72,7 +72,7 @@ fn judged(
     opts: &AnalysisOptions,
 ) -> Option<AtTruth> {
     let own = candidates.iter().find(|c| c.family == family.name())?;
-    let fit = fit_at(family, res, pos, window, family == LastingSource::RECENT)?;
+    let fit = fit_at(family, res, pos, window)?;
     let statistics = own
         .statistic
         .as_ref()

@@ -288,14 +288,7 @@ fn search_finds_a_noise_free_change_where_it_is() {
                 .and_then(magic_core::time::parse_date)
                 .unwrap() as f64
         };
-        let at = fit_at(
-            LastingSource::WHOLE,
-            &alone,
-            t,
-            (day("start"), day("end")),
-            false,
-        )
-        .unwrap();
+        let at = fit_at(LastingSource::WHOLE, &alone, t, (day("start"), day("end"))).unwrap();
         let onset = alone.locating().fit.days[at.onset];
         assert!(
             (day("start")..=day("end")).contains(&onset)
