@@ -309,10 +309,11 @@ fn search_finds_a_noise_free_change_where_it_is() {
                 && (at.score - fit.score).abs() <= 0.05 * fit.score,
             "seed {seed}: at the truth {at:?}, found {fit:?}"
         );
-        let off = (fit.pos[0] - t[0]).hypot(fit.pos[1] - t[1]);
-        let dz = fit.pos[2] - t[2];
+        // Horizontal distance and depth error from the truth.
+        let miss = |p: [f64; 3]| ((p[0] - t[0]).hypot(p[1] - t[1]), (p[2] - t[2]).abs());
+        let (off, dz) = miss(fit.pos);
         assert!(
-            off <= 0.3 && dz.abs() <= 0.5,
+            off <= 0.3 && dz <= 0.5,
             "seed {seed}: found {:?}, truth {t:?}",
             fit.pos
         );
@@ -323,10 +324,9 @@ fn search_finds_a_noise_free_change_where_it_is() {
             pct("vertical_pct") >= 0.5 && pct("horizontal_pct") >= 0.5,
             "seed {seed}: {sup}"
         );
-        let off = (fit_left.pos[0] - t[0]).hypot(fit_left.pos[1] - t[1]);
-        let dz = fit_left.pos[2] - t[2];
+        let (off, dz) = miss(fit_left.pos);
         assert!(
-            off <= 0.3 && dz.abs() <= 0.75,
+            off <= 0.3 && dz <= 0.75,
             "seed {seed}: in what B leaves, found {:?}, truth {t:?}",
             fit_left.pos
         );
