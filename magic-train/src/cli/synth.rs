@@ -267,12 +267,12 @@ pub struct SynthLoopCmd {
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
     /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
-    /// first only where the main source does not trade with that one; measured in the README,
-    /// *A second source term in F*).
+    /// first only where the main source does not trade with that one; measured in
+    /// docs/synthetic-check.md, *A second source term in F*).
     #[arg(long, default_value_t = 1, value_parser = super::args::terms)]
     extra_sources: usize,
     /// The volcano: the most steps F may hold, each at its own station and time (measured in
-    /// the README, *Steps at several stations*).
+    /// docs/synthetic-check.md, *Steps at several stations*).
     #[arg(long, default_value_t = 1, value_parser = super::args::terms)]
     steps: usize,
     /// Folder for each run's loop report (and the tables).

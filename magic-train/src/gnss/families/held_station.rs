@@ -18,8 +18,8 @@ use crate::gnss::GnssResiduals;
 /// held 0.84–0.93 at one station. Every true source found on trial seeds held at most 0.71:
 /// 0.65 in 60 analyses of the six source scenarios (`magic synth-check --first-seed 101 --seeds
 /// 5`), 0.71 in 60 more of the near ones, where one station sees most (seeds 106–120). On the
-/// same trial seeds, the lasting fits beside a step reached 0.94 (README, *Steps at several
-/// stations*).
+/// same trial seeds, the lasting fits beside a step reached 0.94 (docs/synthetic-check.md,
+/// *Steps at several stations*).
 pub const MAX_STATION_SHARE: f64 = 0.75;
 
 /// The station holding the largest share (in energy) of a source's pattern at `p`

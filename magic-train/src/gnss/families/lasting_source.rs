@@ -587,8 +587,9 @@ impl Family<GnssResiduals> for LastingSource {
         Ok(keeping_station(res, sur, part.index))
     }
     /// Position, and the depth's natural logarithm: the depth's error grows with the depth, and
-    /// found depths lie shallow of the truth more often than deep (README, *Blind spots*), so its
-    /// spread on a log scale (the depth within `d · e^(±sd)`) says more than a symmetric one.
+    /// found depths lie shallow of the truth more often than deep (docs/synthetic-check.md,
+    /// *Blind spots*), so its spread on a log scale (the depth within `d · e^(±sd)`) says more
+    /// than a symmetric one.
     fn key_params(&self, _: &GnssResiduals, fit: &LastingFit) -> Vec<(&'static str, f64)> {
         let mut p = position_params(fit.pos);
         p.push(("ln_depth_km", fit.pos[2].max(MIN_DEPTH_KM).ln()));

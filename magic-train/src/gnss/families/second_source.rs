@@ -70,7 +70,7 @@ pub const MIN_RESOLVABLE: f64 = 0.25;
 /// 2008 inflation was significant in 4 of 5 and kept (taking the main field's second order
 /// into the span stopped one). The sources declared first there had 0.25–0.44 of their field
 /// beyond, those declared before a true second one in the two-source scenario 0.57–0.71. Half
-/// the field lies between (README, *A second source term in F*).
+/// the field lies between (docs/synthetic-check.md, *A second source term in F*).
 pub const MIN_RESOLVABLE_DECLARED: f64 = 0.5;
 /// The least angle (degrees), around the main source seen from above, between a declared
 /// source the main one trades with ([`MIN_RESOLVABLE_DECLARED`]) and a candidate for the
