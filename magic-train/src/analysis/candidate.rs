@@ -65,8 +65,11 @@ pub struct ParamSd {
     pub name: String,
     /// The fitted value.
     pub value: f64,
-    /// Its standard deviation.
+    /// Its standard deviation: the bootstrap draws' own ([`ParamSd::sd_raw`]) times the factor
+    /// that calibrates them on synthetic data ([`Family::sd_factor`](super::Family::sd_factor)).
     pub sd: f64,
+    /// The bootstrap draws' own standard deviation.
+    pub sd_raw: f64,
     /// The bootstrap draws' mean: `draws_mean − value` is the shift of the estimator that the
     /// bootstrap sees (its estimate of the estimator's bias around `value`).
     pub draws_mean: f64,

@@ -3,18 +3,22 @@
 //! whose true value lies within ±1 and ±2 standard deviations (about 68 % and 95 % if the sds tell
 //! the truth); and beside them the estimates' mean error against the shift the bootstrap sees
 //! (its draws' mean less the estimate): a bias the draws reproduce shows in both, one they miss
-//! only in the first. A step counts only at the right station (another station's offsets say
-//! nothing).
+//! only in the first; and the factor that would calibrate the draws' own standard deviations
+//! (the 68.27 % quantile of |estimate − truth| / raw sd), which a family sets on trial seeds
+//! ([`Family::sd_factor`](crate::analysis::Family::sd_factor)), per noise model and over both. A
+//! step counts only at the right station (another station's offsets say nothing).
 
 use crate::analysis::Analysis;
 use crate::data::dataset::day_number;
 use crate::gnss::synth::truth::Injected;
+use crate::numerics::quantile;
+use crate::raster::calibrate::ONE_SIGMA;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 /// What is counted per (family, parameter, noise model).
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 struct Row {
     /// Estimates with a standard deviation.
     n: usize,
@@ -24,6 +28,21 @@ struct Row {
     error: f64,
     /// Sum of the bootstrap's shifts (draws' mean − estimate).
     shift: f64,
+    /// Each estimate's |error| in its draws' own standard deviations.
+    raw_z: Vec<f64>,
+}
+
+impl Row {
+    /// Both rows' counts together.
+    fn merged(mut self, other: &Row) -> Row {
+        self.n += other.n;
+        self.within[0] += other.within[0];
+        self.within[1] += other.within[1];
+        self.error += other.error;
+        self.shift += other.shift;
+        self.raw_z.extend_from_slice(&other.raw_z);
+        self
+    }
 }
 
 /// Counts per (family, parameter, noise model).
@@ -108,28 +127,44 @@ impl Coverage {
                 row.within[1] += usize::from(z <= 2.0);
                 row.error += p.value - truth;
                 row.shift += p.draws_mean - p.value;
+                if p.sd_raw > 0.0 {
+                    row.raw_z.push((p.value - truth).abs() / p.sd_raw);
+                }
             }
         }
     }
 
-    /// The Markdown table: family, parameter, noise model, estimates, shares within ±1 and
-    /// ±2 sd, the estimates' mean error and the bootstrap's mean shift (three significant
-    /// digits, in the parameter's units).
+    /// The Markdown table: family, parameter, noise model (and `both`, where there are two or
+    /// more), estimates, shares within ±1 and ±2 sd, the estimates' mean error, the bootstrap's
+    /// mean shift (three significant digits, in the parameter's units) and the factor that would
+    /// calibrate the draws' own sds (two decimals).
     pub fn table(&self) -> String {
         let mut s = String::from(
-            "| family | parameter | noise | n | within ±1 sd | within ±2 sd | mean error | bootstrap's mean shift |\n|---|---|---|---|---|---|---|---|\n",
+            "| family | parameter | noise | n | within ±1 sd | within ±2 sd | mean error | bootstrap's mean shift | raw sd's factor |\n|---|---|---|---|---|---|---|---|---|\n",
         );
-        for ((family, param, noise), r) in &self.rows {
+        let mut pooled: BTreeMap<(String, String), (usize, Row)> = BTreeMap::new();
+        for ((family, param, _), r) in &self.rows {
+            let e = pooled.entry((family.clone(), param.clone())).or_default();
+            e.0 += 1;
+            e.1 = std::mem::take(&mut e.1).merged(r);
+        }
+        let both: BTreeMap<(String, String, String), Row> = pooled
+            .into_iter()
+            .filter(|(_, (k, _))| *k > 1)
+            .map(|((f, p), (_, r))| ((f, p, "both".to_string()), r))
+            .collect();
+        for ((family, param, noise), r) in self.rows.iter().chain(&both) {
             let n = r.n.max(1) as f64;
             let pct = |k: usize| 100.0 * k as f64 / n;
             let _ = writeln!(
                 s,
-                "| {family} | {param} | {noise} | {} | {:.0} % | {:.0} % | {} | {} |",
+                "| {family} | {param} | {noise} | {} | {:.0} % | {:.0} % | {} | {} | {:.2} |",
                 r.n,
                 pct(r.within[0]),
                 pct(r.within[1]),
                 significant3(r.error / n),
-                significant3(r.shift / n)
+                significant3(r.shift / n),
+                quantile(&r.raw_z, ONE_SIGMA)
             );
         }
         s
@@ -152,6 +187,17 @@ mod tests {
     }
 
     fn analysis_drawn(station: &str, value: f64, sd: f64, draws_mean: f64) -> Analysis {
+        analysis_scaled(station, value, sd, draws_mean, 1.0)
+    }
+
+    /// A step at `station` whose offset's sd is the draws' `sd_raw` times `factor`.
+    fn analysis_scaled(
+        station: &str,
+        value: f64,
+        sd_raw: f64,
+        draws_mean: f64,
+        factor: f64,
+    ) -> Analysis {
         let mut c = Candidate::from_scores(
             "step",
             0.5,
@@ -163,7 +209,8 @@ mod tests {
         c.uncertainty = vec![ParamSd {
             name: "offset_u_mm".into(),
             value,
-            sd,
+            sd: sd_raw * factor,
+            sd_raw,
             draws_mean,
         }];
         Analysis {
@@ -194,7 +241,7 @@ mod tests {
         c.add(&analysis("AV06", 10.0, 1.0), &truth, "paper"); // wrong station: not counted
         let t = c.table();
         assert!(
-            t.contains("| step | offset_u_mm | paper | 3 | 33 % | 67 % | 1.67 | 0 |"),
+            t.contains("| step | offset_u_mm | paper | 3 | 33 % | 67 % | 1.67 | 0 | 2.05 |"),
             "{t}"
         );
     }
@@ -208,7 +255,40 @@ mod tests {
         c.add(&analysis_drawn("AV13", 9.3, 1.0, 9.0), &truth, "red");
         let t = c.table();
         assert!(
-            t.contains("| step | offset_u_mm | red | 2 | 100 % | 100 % | -0.600 | -0.200 |"),
+            t.contains("| step | offset_u_mm | red | 2 | 100 % | 100 % | -0.600 | -0.200 | 0.64 |"),
+            "{t}"
+        );
+    }
+
+    #[test]
+    fn counts_against_the_scaled_sd_and_gives_the_raw_one_s_factor_per_model_and_over_both() {
+        let truth = step_at_av13();
+        let mut c = Coverage::default();
+        // Errors 1 and 3 raw sds, scaled by 2: within ±1 and ±2 of the scaled sd.
+        c.add(
+            &analysis_scaled("AV13", 11.0, 1.0, 11.0, 2.0),
+            &truth,
+            "paper",
+        );
+        c.add(
+            &analysis_scaled("AV13", 13.0, 1.0, 13.0, 2.0),
+            &truth,
+            "paper",
+        );
+        // Error 2 raw sds, unscaled: within ±2.
+        c.add(&analysis_scaled("AV13", 8.0, 1.0, 8.0, 1.0), &truth, "red");
+        let t = c.table();
+        assert!(
+            t.contains("| step | offset_u_mm | paper | 2 | 50 % | 100 % | 2.00 | 0 | 2.37 |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| step | offset_u_mm | red | 1 | 0 % | 100 % | -2.00 | 0 | 2.00 |"),
+            "{t}"
+        );
+        // Over both: raw |errors| 1, 2, 3 in sds; their 68.27 % quantile 2 + 0.365.
+        assert!(
+            t.contains("| step | offset_u_mm | both | 3 | 33 % | 100 % | 0.667 | 0 | 2.37 |"),
             "{t}"
         );
     }
