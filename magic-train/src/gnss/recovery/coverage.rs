@@ -33,15 +33,14 @@ struct Row {
 }
 
 impl Row {
-    /// Both rows' counts together.
-    fn merged(mut self, other: &Row) -> Row {
+    /// Adds `other`'s counts to these.
+    fn merge(&mut self, other: &Row) {
         self.n += other.n;
         self.within[0] += other.within[0];
         self.within[1] += other.within[1];
         self.error += other.error;
         self.shift += other.shift;
         self.raw_z.extend_from_slice(&other.raw_z);
-        self
     }
 }
 
@@ -146,7 +145,7 @@ impl Coverage {
         for ((family, param, _), r) in &self.rows {
             let e = pooled.entry((family.clone(), param.clone())).or_default();
             e.0 += 1;
-            e.1 = std::mem::take(&mut e.1).merged(r);
+            e.1.merge(r);
         }
         let both: BTreeMap<(String, String, String), Row> = pooled
             .into_iter()
