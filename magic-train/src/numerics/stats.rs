@@ -15,6 +15,10 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// Share of a standard normal within ±1: the quantile of |error| / sd that a calibrated sd
+/// matches (the map's and the bootstrap's calibration factors are this quantile).
+pub const ONE_SIGMA: f64 = 0.682_689_492;
+
 /// The `q` quantile with linear interpolation between order statistics; 0 for no values.
 pub fn quantile(v: &[f64], q: f64) -> f64 {
     if v.is_empty() {

@@ -15,6 +15,7 @@
 //! uniformly in the bounds.
 
 use super::pixel::N_VARIABLES;
+use crate::numerics::{quantile, ONE_SIGMA};
 use anyhow::{bail, Result};
 use magic_core::invert::{forward, model_correction, Workspace};
 use magic_core::invert_at;
@@ -165,9 +166,6 @@ pub fn coverage(errors: &[[f64; N_VARIABLES]], factors: &[f64]) -> Vec<(f64, f64
         .collect()
 }
 
-/// Share of a standard normal within ±1.
-pub const ONE_SIGMA: f64 = 0.682_689_492;
-
 /// The calibration factors: per variable, the [`ONE_SIGMA`] quantile of |normalised error|.
 pub fn factors(errors: &[[f64; N_VARIABLES]]) -> Result<Vec<f64>> {
     if errors.len() < 100 {
@@ -178,10 +176,8 @@ pub fn factors(errors: &[[f64; N_VARIABLES]]) -> Result<Vec<f64>> {
     }
     Ok((0..N_VARIABLES)
         .map(|k| {
-            let mut a: Vec<f64> = errors.iter().map(|e| e[k].abs()).collect();
-            a.sort_by(f64::total_cmp);
-            let i = ((a.len() as f64 * ONE_SIGMA).ceil() as usize).clamp(1, a.len()) - 1;
-            a[i]
+            let a: Vec<f64> = errors.iter().map(|e| e[k].abs()).collect();
+            quantile(&a, ONE_SIGMA)
         })
         .collect())
 }
@@ -197,4 +193,29 @@ pub fn calibrate(model: &Model<'_>, t_day: f64) -> Result<Vec<f64>> {
         t_day,
     )?;
     factors(&normalised_errors(model, &s, t_day))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn factors_are_the_one_sigma_quantile_of_the_absolute_errors() {
+        // |errors| 1..=100 (half of them negative) in every variable: the 68.27 % quantile,
+        // interpolated between order statistics, is 1 + 0.682689492 · 99.
+        let errors: Vec<[f64; N_VARIABLES]> = (1..=100)
+            .map(|i| [if i % 2 == 0 { i as f64 } else { -(i as f64) }; N_VARIABLES])
+            .collect();
+        let f = factors(&errors).unwrap();
+        assert_eq!(f.len(), N_VARIABLES);
+        for v in f {
+            assert!((v - (1.0 + ONE_SIGMA * 99.0)).abs() < 1e-12, "{v}");
+        }
+    }
+
+    #[test]
+    fn factors_refuse_fewer_than_a_hundred_spectra() {
+        let err = factors(&[[1.0; N_VARIABLES]; 99]).unwrap_err().to_string();
+        assert!(err.contains("only 99 synthetic spectra"), "{err}");
+    }
 }

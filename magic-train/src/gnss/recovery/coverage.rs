@@ -11,8 +11,7 @@
 use crate::analysis::Analysis;
 use crate::data::dataset::day_number;
 use crate::gnss::synth::truth::Injected;
-use crate::numerics::quantile;
-use crate::raster::calibrate::ONE_SIGMA;
+use crate::numerics::{quantile, ONE_SIGMA};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
