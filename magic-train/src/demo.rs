@@ -154,16 +154,20 @@ pub fn run(
             .collect::<Vec<_>>()
             .join(", ")
     );
-    let (peak, depth, share) = plausibility(&qm, d, SplitName::Test)?;
+    let p = plausibility(&qm, d, SplitName::Test)?;
     println!(
-        "its source on the test period: peak ΔV {peak:.2}·10⁶ m³ at depth {depth:.1} km; {:.0} % of test days with depth < 10 km and |ΔV| < 5·10⁶ m³",
-        100.0 * share
+        "its source on the test period: peak ΔV {}·10⁶ m³ at depth {} km ({}; ± the Laplace sd of that day, raw); {:.0} % of test days with depth < 10 km and |ΔV| < 5·10⁶ m³",
+        p.peak_dv_text(),
+        p.peak_depth_text(),
+        crate::gnss::families::iso_date(p.peak_day),
+        100.0 * p.share
     );
     let mut summary = json!({
         "data": d.source,
         "loop": l,
         "int8": {"round": k, "test_mse": eq[2].mse, "f32_test_mse": ef[2].mse, "max_param_diff": quant_diff},
-        "plausibility": {"peak_dv": peak, "peak_depth": depth, "plausible_share": share},
+        "plausibility": {"peak_dv": p.peak_dv, "peak_dv_sd": p.peak_dv_sd, "peak_depth": p.peak_depth,
+            "peak_depth_sd": p.peak_depth_sd, "peak_day": p.peak_day, "plausible_share": p.share},
     });
     match &firmware {
         Ok(()) => {

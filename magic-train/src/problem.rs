@@ -31,6 +31,9 @@ pub struct Metric {
     pub value: f64,
     /// The value as a report prints it.
     pub text: String,
+    /// The value's standard deviation, where the metric has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sd: Option<f64>,
 }
 
 impl Metric {
@@ -41,7 +44,14 @@ impl Metric {
             label,
             value,
             text,
+            sd: None,
         }
+    }
+
+    /// The metric with a standard deviation (kept only if finite).
+    pub fn with_sd(mut self, sd: f64) -> Metric {
+        self.sd = sd.is_finite().then_some(sd);
+        self
     }
 }
 

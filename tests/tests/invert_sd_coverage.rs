@@ -104,3 +104,46 @@ fn source_standard_deviations_cover_the_truth() {
         );
     }
 }
+
+/// The test split's peak that the loop's table and `magic demo` print carries the standard
+/// deviations of its own day (`gnss::plausibility`): the largest ΔV of any test day, its depth,
+/// and `standard_deviations` there; a variant A model (no forward model) has none.
+#[test]
+fn the_peak_carries_the_standard_deviations_of_its_day() {
+    use magic_tests::random_mogi_model;
+    use magic_train::data::SplitName;
+    use magic_train::gnss::plausibility::plausibility;
+    let seed = 3;
+    let syn = magic_train::gnss::synth::generate(Scenario::Clean, seed);
+    let data = &syn.problem.data;
+    for variant in [magic_core::Variant::B, magic_core::Variant::A] {
+        let bytes = random_mogi_model(variant, seed).encode().unwrap();
+        let m = Model::decode(&bytes).unwrap();
+        let p = plausibility(&m, data, SplitName::Test).unwrap();
+        // The peak by a direct pass over the test days.
+        let (mut ws, mut sw) = (Workspace::default(), SdWorkspace::default());
+        let mut best: Option<(f64, f64, Vec<f32>, f64)> = None;
+        for (x, t) in data.test.x.iter().zip(data.test.days()) {
+            let obs = data.physical_row(x);
+            let inv = invert_at::<f64>(&m, &obs, t, &mut ws).unwrap();
+            if best.as_ref().is_none_or(|b| inv.params[3] > b.0) {
+                best = Some((inv.params[3], inv.params[2], obs, t));
+            }
+        }
+        let (dv, depth, obs, t) = best.expect("test days");
+        assert_eq!((p.peak_dv, p.peak_depth, p.peak_day), (dv, depth, t));
+        let inv = invert_at::<f64>(&m, &obs, t, &mut ws).unwrap();
+        match variant {
+            magic_core::Variant::A => {
+                assert!(p.peak_dv_sd.is_nan() && p.peak_depth_sd.is_nan());
+                assert_eq!(p.peak_dv_text(), format!("{dv:.2}"));
+            }
+            _ => {
+                let u = standard_deviations(&m, &obs, &inv, t, &mut sw).unwrap();
+                assert_eq!((p.peak_depth_sd, p.peak_dv_sd), (u.sd[2], u.sd[3]));
+                assert!(p.peak_dv_sd > 0.0 && p.peak_depth_sd > 0.0);
+                assert_eq!(p.peak_dv_text(), format!("{dv:.2} ± {:.2}", u.sd[3]));
+            }
+        }
+    }
+}
