@@ -10,6 +10,7 @@ use crate::gnss::recovery::at_truth::truth_table;
 use crate::gnss::recovery::coverage::Coverage;
 use crate::gnss::recovery::looped::{loop_table, LoopRun};
 use crate::gnss::recovery::misses::miss_table;
+use crate::gnss::recovery::pooled;
 use crate::gnss::recovery::{check_one, recovery_table};
 use crate::gnss::synth::truth::injected;
 use crate::gnss::synth::{self, NoiseModel, Scenario, Site, Spec};
@@ -160,15 +161,43 @@ pub struct SynthCheckCmd {
     /// Write the table (Markdown) here too.
     #[arg(long)]
     table: Option<PathBuf>,
+    /// Run nothing: read the recovery tables of these Markdown files (this command's `--table`
+    /// output, or a README holding one), comma-separated, and print their rows pooled over the
+    /// placements with exact 95 % intervals.
+    #[arg(long, value_name = "FILE", value_delimiter = ',')]
+    pool: Vec<PathBuf>,
     #[command(flatten)]
     json: JsonOut,
     #[command(flatten)]
     site: SiteArg,
 }
 
+/// The recovery tables of `files` pooled over the placements (`--pool`).
+fn pool_files(files: &[PathBuf]) -> Result<()> {
+    let mut all: Vec<pooled::Pooled> = Vec::new();
+    for f in files {
+        let text =
+            std::fs::read_to_string(f).with_context(|| format!("reading {}", f.display()))?;
+        for p in pooled::from_markdown(&text, &f.display().to_string())? {
+            match all
+                .iter_mut()
+                .find(|q| q.scenario == p.scenario && q.noise == p.noise)
+            {
+                Some(q) => q.rows.extend(p.rows),
+                None => all.push(p),
+            }
+        }
+    }
+    print!("{}", pooled::table(&all));
+    Ok(())
+}
+
 /// Runs `magic synth-check`: for every scenario, noise model, placement and seed, generate the
 /// data, train a B model briefly, analyse it and compare with the injected truth.
 pub fn check(a: &SynthCheckCmd) -> Result<()> {
+    if !a.pool.is_empty() {
+        return pool_files(&a.pool);
+    }
     let cfg = crate::gnss::recovery::brief_recipe()
         .with(a.epochs, true)
         .with_warmup(Some(a.warmup));
@@ -205,6 +234,10 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
         rows.push(r);
     }
     let mut table = recovery_table(&rows);
+    table.push_str(
+        "\nPooled over the placements (every injected effect found; a row of 10 seeds is a coarse measure):\n\n",
+    );
+    table.push_str(&pooled::table(&pooled::from_runs(&rows)));
     table.push_str("\nWhy an injected effect was missed (placements together):\n\n");
     table.push_str(&miss_table(&rows));
     let at_truth = truth_table(&rows);

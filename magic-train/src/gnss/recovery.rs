@@ -558,6 +558,7 @@ pub mod at_truth;
 pub mod coverage;
 pub mod looped;
 pub mod misses;
+pub mod pooled;
 
 #[cfg(test)]
 mod tests;

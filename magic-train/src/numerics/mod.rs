@@ -6,4 +6,7 @@ pub mod ar1_white;
 pub mod stats;
 
 pub use ar1_white::{Ar1White, StepScan};
-pub use stats::{mean_std, mean_std_text, median, quantile, sd, spearman, ONE_SIGMA};
+pub use stats::{
+    binomial_cdf, clopper_pearson, mean_std, mean_std_text, median, quantile, sd, spearman,
+    ONE_SIGMA,
+};

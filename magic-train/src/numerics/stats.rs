@@ -35,6 +35,61 @@ pub fn quantile(v: &[f64], q: f64) -> f64 {
     }
 }
 
+/// P(X ≤ k) for X ~ Binomial(n, p), summed in log space (no underflow for large `n`).
+pub fn binomial_cdf(k: usize, n: usize, p: f64) -> f64 {
+    if k >= n || p <= 0.0 {
+        return 1.0;
+    }
+    if p >= 1.0 {
+        return 0.0;
+    }
+    let (lp, lq) = (p.ln(), (1.0 - p).ln());
+    let mut ln_choose = 0.0; // ln C(n, 0)
+    let mut sum = 0.0;
+    for i in 0..=k {
+        if i > 0 {
+            ln_choose += ((n - i + 1) as f64).ln() - (i as f64).ln();
+        }
+        sum += (ln_choose + i as f64 * lp + (n - i) as f64 * lq).exp();
+    }
+    sum.min(1.0)
+}
+
+/// The exact (Clopper–Pearson) two-sided interval of a binomial proportion, `k` successes of
+/// `n`, at confidence `level` (e.g. 0.95): the `p` at which `k` or more, and `k` or fewer, would
+/// be seen with probability (1 − level) / 2. `(0, 1)` for `n = 0`.
+pub fn clopper_pearson(k: usize, n: usize, level: f64) -> (f64, f64) {
+    let a = (1.0 - level) / 2.0;
+    if n == 0 {
+        return (0.0, 1.0);
+    }
+    // The cdf falls as p grows: bisect for the p where `f(p)` crosses `target`.
+    let bisect = |f: &dyn Fn(f64) -> f64, target: f64| {
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        for _ in 0..64 {
+            let mid = 0.5 * (lo + hi);
+            if f(mid) > target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    let lower = if k == 0 {
+        0.0
+    } else {
+        // P(X ≥ k) = a, i.e. P(X ≤ k − 1) = 1 − a.
+        bisect(&|p| binomial_cdf(k - 1, n, p), 1.0 - a)
+    };
+    let upper = if k >= n {
+        1.0
+    } else {
+        bisect(&|p| binomial_cdf(k, n, p), a)
+    };
+    (lower, upper)
+}
+
 /// Sample standard deviation; 0 for fewer than two values.
 pub fn sd(v: &[f64]) -> f64 {
     if v.len() < 2 {
@@ -105,6 +160,39 @@ pub fn spearman(a: &[f64], b: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn binomial_cdf_sums_the_probabilities() {
+        // 10 fair coins, 3 heads or fewer: (1 + 10 + 45 + 120) / 1024.
+        assert!((binomial_cdf(3, 10, 0.5) - 176.0 / 1024.0).abs() < 1e-14);
+        assert_eq!(binomial_cdf(10, 10, 0.3), 1.0);
+        assert_eq!(binomial_cdf(0, 10, 0.0), 1.0);
+        assert_eq!(binomial_cdf(9, 10, 1.0), 0.0);
+        // Large n in log space: P(X ≤ 4 999) for Binomial(10 000, 0.5), just under a half.
+        let c = binomial_cdf(4_999, 10_000, 0.5);
+        assert!((c - 0.496).abs() < 1e-3, "{c}");
+    }
+
+    /// Clopper–Pearson 95 % intervals as tabulated (four decimals; max error 5e-5 + rounding).
+    const CLOPPER_PEARSON_95: [(usize, usize, f64, f64); 5] = [
+        (0, 10, 0.0, 0.3085),
+        (5, 10, 0.1871, 0.8129),
+        (9, 10, 0.5550, 0.9975),
+        (10, 10, 0.6915, 1.0),
+        (1, 20, 0.0013, 0.2487),
+    ];
+
+    #[test]
+    fn clopper_pearson_matches_the_tables() {
+        for (k, n, lo, hi) in CLOPPER_PEARSON_95 {
+            let (l, h) = clopper_pearson(k, n, 0.95);
+            assert!(
+                (l - lo).abs() < 1e-4 && (h - hi).abs() < 1e-4,
+                "{k}/{n}: {l} {h}"
+            );
+        }
+        assert_eq!(clopper_pearson(0, 0, 0.95), (0.0, 1.0));
+    }
 
     #[test]
     fn order_statistics() {
