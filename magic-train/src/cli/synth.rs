@@ -172,21 +172,17 @@ pub struct SynthCheckCmd {
     site: SiteArg,
 }
 
-/// The recovery tables of `files` pooled over the placements (`--pool`).
+/// The recovery tables of `files` pooled over the placements (`--pool`), a placement's rows from
+/// several files (other seeds) summed.
 fn pool_files(files: &[PathBuf]) -> Result<()> {
     let mut all: Vec<pooled::Pooled> = Vec::new();
     for f in files {
         let text =
             std::fs::read_to_string(f).with_context(|| format!("reading {}", f.display()))?;
-        for p in pooled::from_markdown(&text, &f.display().to_string())? {
-            match all
-                .iter_mut()
-                .find(|q| q.scenario == p.scenario && q.noise == p.noise)
-            {
-                Some(q) => q.rows.extend(p.rows),
-                None => all.push(p),
-            }
-        }
+        pooled::merge(
+            &mut all,
+            pooled::from_markdown(&text, &f.display().to_string())?,
+        );
     }
     print!("{}", pooled::table(&all));
     Ok(())

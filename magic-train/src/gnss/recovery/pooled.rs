@@ -57,6 +57,16 @@ fn add(out: &mut Vec<Pooled>, scenario: &str, noise: &str, placement: &str, k: u
     }
 }
 
+/// `more` added to `all`: a scenario's rows of the same placement summed (the same rows run on
+/// other seeds), new ones appended.
+pub fn merge(all: &mut Vec<Pooled>, more: Vec<Pooled>) {
+    for p in more {
+        for (pl, k, n) in p.rows {
+            add(all, &p.scenario, &p.noise, &pl, k, n);
+        }
+    }
+}
+
 /// The runs of a check pooled (scenarios with injected effects only).
 pub fn from_runs(runs: &[Recovery]) -> Vec<Pooled> {
     let mut out = Vec::new();
@@ -199,6 +209,23 @@ after
             t.contains("| lasting | red | train 10/10 | 10/10 | 100 % | 69–100 % | 100 % |"),
             "{t}"
         );
+    }
+
+    #[test]
+    fn merging_sums_a_placement_run_on_other_seeds() {
+        let mut all = from_markdown(TABLE, "a.md").unwrap();
+        let more = from_markdown(&TABLE.replace("| 7/10 | 2/10", "| 9/10 | 2/10"), "b.md").unwrap();
+        merge(&mut all, more);
+        assert_eq!(all.len(), 3);
+        assert_eq!(
+            all[0].rows,
+            vec![
+                ("train".to_string(), 20, 20),
+                ("valid".to_string(), 16, 20),
+                ("test".to_string(), 18, 20)
+            ]
+        );
+        assert_eq!(all[0].total(), (54, 60));
     }
 
     #[test]
