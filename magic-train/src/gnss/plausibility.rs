@@ -6,6 +6,7 @@
 use crate::data::{Dataset, SplitName};
 use crate::problem::Metric;
 use anyhow::{anyhow, Result};
+use magic_core::invert::Inversion;
 use magic_core::uncertainty::{standard_deviations, SdWorkspace};
 use magic_core::{invert_at, Model, Workspace};
 
@@ -44,22 +45,22 @@ pub fn plausibility(model: &Model<'_>, data: &Dataset, split: SplitName) -> Resu
     let s = data.split(split);
     let mut ws = Workspace::default();
     let (mut peak, mut depth, mut ok) = (f64::NEG_INFINITY, 0.0, 0usize);
-    let mut at: Option<(Vec<f32>, f64)> = None;
+    // The peak day's observations, day and inversion, for its standard deviations.
+    let mut at: Option<(Vec<f32>, f64, Inversion<f64>)> = None;
     for (row, t) in s.x.iter().zip(s.days()) {
         let obs = data.physical_row(row);
         let inv = invert_at::<f64>(model, &obs, t, &mut ws).map_err(|e| anyhow!("{e}"))?;
         let (d, dv) = (inv.params[2], inv.params[3]);
+        ok += usize::from(plausible(&inv.params[..4]));
         if dv > peak {
             peak = dv;
             depth = d;
-            at = Some((obs, t));
+            at = Some((obs, t, inv));
         }
-        ok += usize::from(plausible(&inv.params[..4]));
     }
     let (mut dv_sd, mut depth_sd, mut day) = (f64::NAN, f64::NAN, f64::NAN);
-    if let Some((obs, t)) = at {
+    if let Some((obs, t, inv)) = at {
         day = t;
-        let inv = invert_at::<f64>(model, &obs, t, &mut ws).map_err(|e| anyhow!("{e}"))?;
         if let Ok(u) = standard_deviations(model, &obs, &inv, t, &mut SdWorkspace::default()) {
             (depth_sd, dv_sd) = (u.sd[2], u.sd[3]);
         }
