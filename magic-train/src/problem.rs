@@ -101,6 +101,11 @@ pub trait Problem: Sync {
     fn describe_residuals(&self, res: &Self::Residuals) -> (serde_json::Value, String);
     /// Figures of an analysis (PNG files into `dir`).
     fn analysis_plots(&self, res: &Self::Residuals, a: &Analysis, dir: &Path) -> Result<()>;
+    /// Writes the residual series the families search, as CSV files into `dir` (`magic residuals
+    /// --series`); an error for a problem without one.
+    fn write_series(&self, _res: &Self::Residuals, _dir: &Path) -> Result<()> {
+        anyhow::bail!("--series: only a volcano (GNSS) model's residuals form a series of days")
+    }
 
     /// Effects the loop tests directly (retrains with them) when it did not add them itself.
     fn direct_tests(&self) -> Vec<OwnedEffect> {

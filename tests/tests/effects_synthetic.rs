@@ -175,3 +175,59 @@ fn fitted_effect_reproduces_the_fit() {
         "step offset: report vs effect {reported:.2e} mm, applied vs declared {applied:.2e} mm"
     );
 }
+
+/// `--series` writes the view a point source is searched on: one row per analysed day (its date),
+/// each channel in mm (the standardised residuals times the channel's scale), and the lasting
+/// search grid's points with their patterns; the CSV round trip keeps every digit of an f64.
+#[test]
+fn the_residual_series_is_the_analysed_view_in_mm() {
+    let spec = Spec::new(Scenario::Clean, 1);
+    let check = check_one(
+        &spec,
+        &Site::akutan(),
+        &brief_recipe(),
+        &AnalysisOptions::default(),
+    )
+    .unwrap();
+    let dir = std::env::temp_dir().join(format!("magic-series-{}", std::process::id()));
+    magic_train::gnss::residuals::series::write(&check.residuals, &dir).unwrap();
+    let view = check.residuals.locating();
+    let (nc, scale) = (view.nc(), &view.ctx.scale);
+    let mut rows = csv::Reader::from_path(dir.join("residuals.csv")).unwrap();
+    let head = rows.headers().unwrap().clone();
+    assert_eq!(head.len(), nc + 1);
+    assert_eq!(&head[0], "date");
+    assert_eq!(&head[1], &format!("ux_{}", view.ctx.network.names[0]));
+    let mut n = 0;
+    for (t, row) in rows.records().enumerate() {
+        let row = row.unwrap();
+        assert_eq!(
+            &row[0],
+            magic_train::gnss::families::iso_date(view.fit.days[t])
+        );
+        for c in 0..nc {
+            let v: f64 = row[c + 1].parse().unwrap();
+            assert_eq!(v, view.fit.r[t * nc + c] * scale[c], "day {t}, channel {c}");
+        }
+        n += 1;
+    }
+    assert_eq!(n, view.fit.len(nc));
+    let grid = magic_train::gnss::families::lasting_source::lasting_grid(view);
+    let mut rows = csv::Reader::from_path(dir.join("grid.csv")).unwrap();
+    assert_eq!(rows.headers().unwrap().len(), nc + 3);
+    let mut k = 0;
+    for (row, (p, g)) in rows.records().zip(grid.points.iter().zip(&grid.patterns)) {
+        let row = row.unwrap();
+        for (j, v) in p.iter().chain(g.iter()).enumerate() {
+            let want = if j < 3 { *v } else { v * scale[j - 3] };
+            assert_eq!(
+                row[j].parse::<f64>().unwrap(),
+                want,
+                "grid row {k}, column {j}"
+            );
+        }
+        k += 1;
+    }
+    assert_eq!(k, grid.points.len());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -47,6 +47,11 @@ pub struct ResidualsCmd {
     /// Write the analysis' figures (PNG) into this folder.
     #[arg(long)]
     plots: Option<PathBuf>,
+    /// The volcano: write the residual series a point source is searched on into this folder
+    /// (`residuals.csv`: date and each channel, mm; `grid.csv`: the lasting source's search grid
+    /// and each point's field of 10⁶ m³, mm, projected as the residuals are).
+    #[arg(long, value_name = "DIR")]
+    series: Option<PathBuf>,
 }
 
 /// Runs `magic residuals`.
@@ -71,6 +76,10 @@ pub fn run(a: &ResidualsCmd) -> Result<()> {
         if let Some(d) = &a.plots {
             p.analysis_plots(&res, &an, d)?;
             eprintln!("plots -> {}", d.display());
+        }
+        if let Some(d) = &a.series {
+            p.write_series(&res, d)?;
+            eprintln!("residual series -> {}", d.display());
         }
     });
     Ok(())

@@ -166,6 +166,11 @@ pub struct SynthCheckCmd {
     /// placements with exact 95 % intervals.
     #[arg(long, value_name = "FILE", value_delimiter = ',')]
     pool: Vec<PathBuf>,
+    /// Write each analysis' residual series (`magic residuals --series`) and the truth injected
+    /// (`truth.json`) into a folder of this one, `<scenario>_<noise>_<placement>_<seed>` (no
+    /// placement for a scenario without events).
+    #[arg(long, value_name = "DIR")]
+    series: Option<PathBuf>,
     #[command(flatten)]
     json: JsonOut,
     #[command(flatten)]
@@ -213,6 +218,23 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
     ) {
         let t0 = std::time::Instant::now();
         let check = check_one(&spec, &site, &cfg, &opts)?;
+        if let Some(dir) = &a.series {
+            let r = &check.recovery;
+            let placement = (r.placement != "-").then_some(r.placement.as_str());
+            let name = [Some(r.scenario.as_str()), Some(r.noise.as_str()), placement]
+                .into_iter()
+                .flatten()
+                .map(str::to_string)
+                .chain([spec.seed.to_string()])
+                .collect::<Vec<_>>()
+                .join("_");
+            let d = dir.join(name);
+            crate::gnss::residuals::series::write(&check.residuals, &d)?;
+            write_file(
+                &d.join("truth.json"),
+                serde_json::to_string_pretty(&check.truth)?,
+            )?;
+        }
         let (r, an) = (check.recovery, check.analysis);
         let secs = t0.elapsed().as_secs_f64();
         eprintln!(

@@ -291,6 +291,10 @@ impl Problem for GnssProblem {
     fn describe_residuals(&self, res: &GnssResiduals) -> (serde_json::Value, String) {
         res.describe()
     }
+    fn write_series(&self, res: &GnssResiduals, dir: &Path) -> Result<()> {
+        residuals::series::write(res, dir)
+    }
+
     fn analysis_plots(&self, res: &GnssResiduals, a: &Analysis, dir: &Path) -> Result<()> {
         report::analysis_plots(res, a, dir)
     }

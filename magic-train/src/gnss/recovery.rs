@@ -12,6 +12,7 @@
 
 use super::synth::truth::{background, injected, Injected};
 use super::synth::{Site, Spec};
+use super::GnssResiduals;
 use crate::analysis::{analyse, Analysis, AnalysisOptions, Candidate, Rejection};
 use crate::numerics::median;
 use crate::train::{train_model, ModelKind, TrainConfig};
@@ -402,6 +403,8 @@ pub struct Check {
     pub analysis: Analysis,
     /// What was injected (`truth.json`).
     pub truth: serde_json::Value,
+    /// The residuals analysed.
+    pub residuals: GnssResiduals,
 }
 
 #[cfg(test)]
@@ -454,6 +457,7 @@ pub fn check_one(
         recovery,
         analysis,
         truth: s.truth,
+        residuals: res,
     })
 }
 

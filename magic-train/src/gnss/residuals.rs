@@ -755,5 +755,6 @@ fn dominant_pattern(r: &[f64], nc: usize) -> (Vec<f64>, f64) {
     (v, if total > 0.0 { lambda / total } else { 0.0 })
 }
 
+pub mod series;
 #[cfg(test)]
 mod tests;

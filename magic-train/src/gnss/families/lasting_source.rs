@@ -110,8 +110,9 @@ pub const SD_FACTORS: [(&str, f64); 4] = [
 /// depth 0; every grid depth is larger).
 const MIN_DEPTH_KM: f64 = 1e-3;
 
-/// The lasting source's search grid ([`LASTING_DEPTHS`]; computed once per set of residuals).
-fn lasting_grid(res: &GnssResiduals) -> &SourceGrid {
+/// The lasting source's search grid ([`LASTING_DEPTHS`]; computed once per set of residuals):
+/// its points and their patterns, projected as the residuals are.
+pub fn lasting_grid(res: &GnssResiduals) -> &SourceGrid {
     res.ctx
         .lasting_grid
         .get_or_init(|| grid_at(res, &LASTING_DEPTHS))
