@@ -13,8 +13,8 @@ with another statistic: generalised least squares under a noise model fitted to 
 - Statistic: for each grid point and onset (every STEP days, EDGE days from the record's ends),
   the change along a ramp of RAMP days, whitened by the fitted model (Kalman innovations) beside
   each channel's mean, amplitude free: |z|, a standard normal under the fitted model.
-- Chance level: the 95 % quantile of the largest |z| over the same grid and onsets in NULLS
-  records simulated under the fitted model.
+- Chance level: the QUANTILE (95 %) quantile of the largest |z| over the same grid and onsets in
+  NULLS records simulated under the fitted model.
 - The best fit is rejected on the grid's bound (as `magic` rejects a point source there).
 - Synthetic runs: found when the best |z| exceeds its chance level off the bound, within 2 km
   (horizontally) of the injected source.
@@ -133,8 +133,9 @@ def search(dates, r, pats, args, seed):
         (np.abs(p @ (gw.T @ rng.standard_normal((n, nc))).T) / denom).max()
         for _ in range(args.nulls)
     ]
-    chance = float(np.quantile(null, 0.95))
-    return float(z[best]), chance, best[0], dates[onsets[best[1]]], f"phi {phi:.4f}, rho {rho:.3g}"
+    chance = float(np.quantile(null, args.quantile))
+    noise = f"phi {phi:.4f}, rho {rho:.3g}; null 95 %/99 % {np.quantile(null, 0.95):.2f}/{np.quantile(null, 0.99):.2f}"
+    return float(z[best]), chance, best[0], dates[onsets[best[1]]], noise
 
 
 def folders(paths):
@@ -166,6 +167,7 @@ def main():
     ap.add_argument("--step", type=int, default=10, help="days between onsets")
     ap.add_argument("--edge", type=int, default=60, help="days from the ends to the first/last onset")
     ap.add_argument("--nulls", type=int, default=100, help="simulated records for the chance level")
+    ap.add_argument("--quantile", type=float, default=0.95, help="the chance level's quantile of the null's max |z|")
     args = ap.parse_args()
     tally = defaultdict(lambda: [0, 0])
     for i, d in enumerate(folders(args.dirs)):

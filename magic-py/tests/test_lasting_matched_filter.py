@@ -66,7 +66,7 @@ def test_the_search_finds_a_ramp_where_it_was_put():
     pts = np.array([[float(i), 0.0, 1.0] for i in range(40)])
     ramp = np.clip((np.arange(n) - 900) / 90, 0, 1)
     r = noise(rng, n, channels, 0.99, 1.0) + 3.0 * np.outer(ramp, pats[17])
-    args = types.SimpleNamespace(ramp=90, step=10, edge=60, nulls=50)
+    args = types.SimpleNamespace(ramp=90, step=10, edge=60, nulls=50, quantile=0.95)
     dates = [str(t) for t in range(n)]
     z, chance, k, onset, _ = m.search(dates, r, pats, args, 0)
     assert k == 17
