@@ -19,7 +19,7 @@ with another statistic: generalised least squares under a noise model fitted to 
 - Synthetic runs: found when the best |z| exceeds its chance level off the bound, within 2 km
   (horizontally) of the injected source.
 
-An experiment, not part of `magic`: docs/fresh-seeds.md says what it measured.
+An experiment, not part of `magic`: docs/matched-filter.md says what it measured.
 Needs numpy. Usage: scripts/lasting_matched_filter.py DIR [DIR …] (a folder holding
 `residuals.csv`, or one holding such folders).
 """
@@ -52,15 +52,26 @@ def read_series(d):
     if head[0] != "date":
         sys.exit(f"{d}/residuals.csv, line 1, column 1: expected `date`, found `{head[0]}`")
     dates = [r[0] for r in rows]
-    try:
-        r = np.array([[float(v) for v in row[1:]] for row in rows])
-    except ValueError as e:
-        sys.exit(f"{d}/residuals.csv: {e}")
+    r = numbers(f"{d}/residuals.csv", rows, 1)
     ghead, grows = read_csv(os.path.join(d, "grid.csv"))
     if ghead[3:] != head[1:]:
         sys.exit(f"{d}/grid.csv, line 1: its channels are not residuals.csv's")
-    g = np.array([[float(v) for v in row] for row in grows])
+    g = numbers(f"{d}/grid.csv", grows, 0)
     return dates, r, g[:, :3], g[:, 3:]
+
+
+def numbers(path, rows, first):
+    """The rows' cells from column `first` on as floats; a bad cell exits naming its place."""
+    out = np.empty((len(rows), len(rows[0]) - first))
+    for i, row in enumerate(rows):
+        if len(row) != len(rows[0]):
+            sys.exit(f"{path}, line {i + 2}: {len(row)} cells, the first row has {len(rows[0])}")
+        for j, v in enumerate(row[first:]):
+            try:
+                out[i, j] = float(v)
+            except ValueError:
+                sys.exit(f"{path}, line {i + 2}, column {j + first + 1}: `{v}` is not a number")
+    return out
 
 
 def structure(r, lag):
@@ -172,7 +183,7 @@ def main():
     tally = defaultdict(lambda: [0, 0])
     for i, d in enumerate(folders(args.dirs)):
         dates, r, pts, pats = read_series(d)
-        z, chance, k, onset, ratio = search(dates, r, pats, args, i)
+        z, chance, k, onset, noise = search(dates, r, pats, args, i)
         x, y, depth = pts[k]
         bound = bool(np.any((pts[k] - pts.min(axis=0) < BOUND_KM) | (pts.max(axis=0) - pts[k] < BOUND_KM)))
         group, truth = lasting_truth(d)
@@ -188,7 +199,7 @@ def main():
                 line += f": {'false' if ok else 'none'}"
             tally[group][0] += ok
             tally[group][1] += 1
-        print(line + f" (noise: {ratio})", flush=True)
+        print(line + f" (noise: {noise})", flush=True)
     if tally:
         print("\n| runs | found (lasting injected) or false (none injected) |\n|---|---|")
         for g, (k, n) in sorted(tally.items()):

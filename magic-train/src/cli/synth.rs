@@ -220,15 +220,11 @@ pub fn check(a: &SynthCheckCmd) -> Result<()> {
         let check = check_one(&spec, &site, &cfg, &opts)?;
         if let Some(dir) = &a.series {
             let r = &check.recovery;
-            let placement = (r.placement != "-").then_some(r.placement.as_str());
-            let name = [Some(r.scenario.as_str()), Some(r.noise.as_str()), placement]
-                .into_iter()
-                .flatten()
-                .map(str::to_string)
-                .chain([spec.seed.to_string()])
-                .collect::<Vec<_>>()
-                .join("_");
-            let d = dir.join(name);
+            let mut parts = vec![r.scenario.as_str(), r.noise.as_str()];
+            if r.placement != "-" {
+                parts.push(&r.placement);
+            }
+            let d = dir.join(format!("{}_{}", parts.join("_"), spec.seed));
             crate::gnss::residuals::series::write(&check.residuals, &d)?;
             write_file(
                 &d.join("truth.json"),

@@ -294,7 +294,6 @@ impl Problem for GnssProblem {
     fn write_series(&self, res: &GnssResiduals, dir: &Path) -> Result<()> {
         residuals::series::write(res, dir)
     }
-
     fn analysis_plots(&self, res: &GnssResiduals, a: &Analysis, dir: &Path) -> Result<()> {
         report::analysis_plots(res, a, dir)
     }
