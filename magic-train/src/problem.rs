@@ -93,7 +93,7 @@ pub trait Problem: Sync {
     /// The residuals of a model (variant B or C) for the analysis.
     fn residuals(&self, model: &Model<'_>, opts: &AnalysisOptions) -> Result<Self::Residuals>;
     /// The effect families that can be looked for, in report order.
-    fn families(&self) -> Vec<Box<dyn DynFamily<Self::Residuals>>>;
+    fn families(&self, opts: &AnalysisOptions) -> Vec<Box<dyn DynFamily<Self::Residuals>>>;
     /// Marks the candidates a higher-ranked one accounts for (`effects` ranked, best first) as
     /// not significant, with the reason: one signal two families see. None by default.
     fn reconcile(&self, _res: &Self::Residuals, _effects: &mut [Candidate]) {}

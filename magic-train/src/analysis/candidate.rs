@@ -94,11 +94,16 @@ pub const STAT_SD_MARGIN: f64 = 5.0;
 /// assert!(!stands_out(90.0, &[20.0]), "one surrogate has no spread to compare with");
 /// ```
 pub fn stands_out(stat: f64, of_surrogates: &[f64]) -> bool {
+    stands_out_by(stat, of_surrogates, STAT_SD_MARGIN)
+}
+
+/// [`stands_out`] by `k` standard deviations instead of [`STAT_SD_MARGIN`].
+pub fn stands_out_by(stat: f64, of_surrogates: &[f64], k: f64) -> bool {
     if of_surrogates.len() < 2 || !stat.is_finite() {
         return false;
     }
     let top = of_surrogates.iter().copied().fold(f64::MIN, f64::max);
-    stat > top && stat.max(0.0).sqrt() > root_threshold(of_surrogates, STAT_SD_MARGIN)
+    stat > top && stat.max(0.0).sqrt() > root_threshold(of_surrogates, k)
 }
 
 /// The mean plus `k` standard deviations of the square roots of `values` (negatives as 0): the

@@ -10,7 +10,8 @@
 //! [`Effect`]: magic_core::effects::Effect
 
 use super::{
-    stands_out, AnalysisOptions, Candidate, HeldPart, ParamSd, Rejection, MIN_EXCESS, SD_MARGIN,
+    stands_out_by, AnalysisOptions, Candidate, HeldPart, ParamSd, Rejection, MIN_EXCESS, SD_MARGIN,
+    STAT_SD_MARGIN,
 };
 use crate::model::OwnedEffect;
 use anyhow::Result;
@@ -84,10 +85,10 @@ pub trait Family<R>: Sync {
     /// a level that wanders for years explains held-out days like a step, but only a step is
     /// sharper than the noise makes its local jumps); `None` for most families.
     /// A statistic that stands out of the surrogates' by a margin like the score's
-    /// ([`stands_out`]) makes the fit significant once its held-out score is above 0 (a
-    /// vetoing statistic) or above chance (a supporting one): a local effect (a step in the
-    /// record's last months) can be clear and still explain little of the whole network's
-    /// variance.
+    /// ([`stands_out`](super::stands_out)) makes the fit significant once its held-out score is
+    /// above 0 (a vetoing or detecting statistic) or above chance (a supporting one): a local
+    /// effect (a step in the record's last months) can be clear and still explain little of the
+    /// whole network's variance.
     fn statistic(&self, _fit: &Self::Fit) -> Option<f64> {
         None
     }
@@ -97,6 +98,18 @@ pub trait Family<R>: Sync {
     /// out, it takes nothing away (a scan whose chance peaks are as high as a real effect's).
     fn statistic_vetoes(&self) -> bool {
         true
+    }
+    /// Whether a supporting [`statistic`](Family::statistic) that stands out detects: it makes
+    /// the fit significant once its held-out score is above 0, as a vetoing one does, without
+    /// vetoing (a statistic that sees more than the score, calibrated on its own surrogates).
+    fn statistic_detects(&self) -> bool {
+        false
+    }
+    /// Standard deviations above the surrogates' mean (square-root scale) the
+    /// [`statistic`](Family::statistic) must reach to stand out ([`STAT_SD_MARGIN`] unless the
+    /// family sets its own).
+    fn statistic_sd_margin(&self) -> f64 {
+        STAT_SD_MARGIN
     }
     /// The fit's key parameters (name, value), whose uncertainty the bootstrap measures.
     fn key_params(&self, _res: &R, _fit: &Self::Fit) -> Vec<(&'static str, f64)> {
@@ -212,7 +225,12 @@ pub fn judge<R, F: Family<R>>(
         c.rejected = Some(why);
     }
     if let Some(stat) = family.statistic(fit) {
-        with_statistic(&mut c, stat, chance.statistics, family.statistic_vetoes());
+        let rule = StatisticRule {
+            vetoes: family.statistic_vetoes(),
+            detects: family.statistic_detects(),
+            margin: family.statistic_sd_margin(),
+        };
+        with_statistic(&mut c, stat, chance.statistics, rule);
     }
     if let Some(held) = family.held_part(res, fit) {
         let margin = family.sd_margin();
@@ -255,33 +273,42 @@ fn held_chance<R: Sync, F: Family<R>>(
 /// surrogates' (the rule of [`Family::statistic`]: a vetoing statistic the surrogates reach
 /// rejects; one that [`stands_out`] makes significant a score the rule lets through), and
 /// keeps both on it.
-fn with_statistic(c: &mut Candidate, stat: f64, of_surrogates: Vec<f64>, vetoes: bool) {
+/// How a family's detection statistic judges its fit ([`Family::statistic_vetoes`],
+/// [`Family::statistic_detects`], [`Family::statistic_sd_margin`]).
+#[derive(Clone, Copy, Debug)]
+struct StatisticRule {
+    vetoes: bool,
+    detects: bool,
+    margin: f64,
+}
+
+fn with_statistic(c: &mut Candidate, stat: f64, of_surrogates: Vec<f64>, rule: StatisticRule) {
     let top = of_surrogates
         .iter()
         .copied()
         .fold(f64::NEG_INFINITY, f64::max);
     if c.rejected.is_none() {
-        if stat <= top && vetoes {
+        if stat <= top && rule.vetoes {
             c.significant = false;
             c.rejected = Some(Rejection::StatisticNotAbove {
                 statistic: stat,
                 largest: top,
             });
-        } else if carries(vetoes, c) {
-            c.significant |= stands_out(stat, &of_surrogates);
+        } else if carries(rule.vetoes || rule.detects, c) {
+            c.significant |= stands_out_by(stat, &of_surrogates, rule.margin);
         }
     }
     c.statistic = Some((stat, of_surrogates));
 }
 
 /// Whether a candidate's held-out score lets a statistic that [`stands_out`] make it significant.
-/// A vetoing statistic is the detection test itself (above every surrogate's, and calibrated on
+/// A vetoing or detecting statistic (`any_gain`) is the detection test itself (above every surrogate's, and calibrated on
 /// them with the look-elsewhere of its scan): the score need only show that the fit predicts the
 /// days it was not fitted on (above 0) — a step in the record's last months explains less of the
 /// network's variance than the surrogates' best steps, placed mid-record, do. A supporting
 /// statistic carries a score above chance.
-fn carries(vetoes: bool, c: &Candidate) -> bool {
-    if vetoes {
+fn carries(any_gain: bool, c: &Candidate) -> bool {
+    if any_gain {
         c.variance_explained > 0.0
     } else {
         c.excess() > 0.0
@@ -344,6 +371,8 @@ mod tests {
         score: f64,
         stat: f64,
         vetoes: bool,
+        /// Whether the statistic detects, and its margin (sd).
+        detects: Option<f64>,
     }
 
     impl Family<f64> for Toy {
@@ -376,9 +405,19 @@ mod tests {
         fn statistic_vetoes(&self) -> bool {
             self.vetoes
         }
+        fn statistic_detects(&self) -> bool {
+            self.detects.is_some()
+        }
+        fn statistic_sd_margin(&self) -> f64 {
+            self.detects.unwrap_or(STAT_SD_MARGIN)
+        }
     }
 
     fn assess_toy(score: f64, stat: f64, vetoes: bool) -> Candidate {
+        assess_rule(score, stat, vetoes, None)
+    }
+
+    fn assess_rule(score: f64, stat: f64, vetoes: bool, detects: Option<f64>) -> Candidate {
         let opts = AnalysisOptions {
             bootstrap: 0,
             ..AnalysisOptions::default()
@@ -387,6 +426,7 @@ mod tests {
             score,
             stat,
             vetoes,
+            detects,
         }
         .assess(&-1.0, &opts)
         .unwrap()
@@ -485,5 +525,20 @@ mod tests {
         assert!(assess_toy(0.0125, 90.0, false).significant);
         assert!(!assess_toy(0.0125, 26.0, false).significant);
         assert!(!assess_toy(0.005, 90.0, false).significant);
+    }
+
+    #[test]
+    fn a_detecting_statistic_carries_any_gain_and_never_rejects() {
+        // Standing out, it carries a score below chance that is above 0, as a vetoing one does.
+        let c = assess_rule(0.005, 90.0, false, Some(STAT_SD_MARGIN));
+        assert!(c.excess() < 0.0 && c.significant, "{c:?}");
+        assert!(!assess_rule(0.0, 90.0, false, Some(STAT_SD_MARGIN)).significant);
+        // Not standing out, it takes nothing from a score beyond its margin.
+        let c = assess_rule(0.2, 22.0, false, Some(STAT_SD_MARGIN));
+        assert!(c.significant && c.rejected.is_none(), "{c:?}");
+        // Its own margin: the surrogates' roots are about 4.74 ± 0.30, their largest below 25;
+        // 26 stands out by 1 sd, not by the default 5.
+        assert!(assess_rule(0.005, 26.0, false, Some(1.0)).significant);
+        assert!(!assess_rule(0.005, 26.0, false, Some(STAT_SD_MARGIN)).significant);
     }
 }

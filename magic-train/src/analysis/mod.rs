@@ -16,7 +16,9 @@ mod rejection;
 pub mod score;
 pub mod surrogate;
 
-pub use candidate::{rank, stands_out, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN};
+pub use candidate::{
+    rank, stands_out, stands_out_by, Candidate, ParamSd, MIN_EXCESS, SD_MARGIN, STAT_SD_MARGIN,
+};
 pub use family::{judge, surrogate_seeds, Chance, DynFamily, Family};
 pub use held_part::HeldPart;
 pub use rejection::{Rejection, Side};
@@ -46,6 +48,20 @@ pub enum MainSource {
     Held,
 }
 
+/// The volcano: how a change that stays is detected (the forest has none).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum LastingStatistic {
+    /// Located by the network's offsets over 180-day windows, detected by its gain on held-out
+    /// stations beyond its surrogates' (the README's tables).
+    #[default]
+    Scan,
+    /// Located and detected by a matched filter: the residuals whitened by white plus AR(1)
+    /// noise fitted to them, a 90-day ramp at every onset, every station at its own weight; its
+    /// z standing out of its surrogates' detects, the held-out gain need only be above 0
+    /// (docs/matched-filter.md).
+    Matched,
+}
+
 /// Options of [`analyse`], checked once by the problem's residuals.
 #[derive(Clone, Debug)]
 pub struct AnalysisOptions {
@@ -72,6 +88,8 @@ pub struct AnalysisOptions {
     /// The volcano: the most steps F may hold, each at its own station and time
     /// ([`OwnedEffect::same_term`]); the loop adds none beyond it.
     pub steps: usize,
+    /// The volcano: how a change that stays is detected.
+    pub lasting: LastingStatistic,
 }
 
 impl Default for AnalysisOptions {
@@ -85,6 +103,7 @@ impl Default for AnalysisOptions {
             main_source: MainSource::Free,
             extra_sources: 1,
             steps: 1,
+            lasting: LastingStatistic::Scan,
         }
     }
 }
@@ -293,7 +312,7 @@ pub fn analyse<P: Problem + ?Sized>(
     }
     let res = problem.residuals(model, opts)?;
     let mut effects = problem
-        .families()
+        .families(opts)
         .iter()
         .map(|f| f.assess(&res, opts))
         .collect::<Result<Vec<_>>>()?;

@@ -2,7 +2,7 @@
 //! by the share of residual variance they explain on held-out data beyond chance.
 
 use super::args::{decode, DataArgs, JsonOut, ModelArg};
-use crate::analysis::{analyse, AnalysisOptions, MainSource};
+use crate::analysis::{analyse, AnalysisOptions, LastingStatistic, MainSource};
 use crate::data::SplitName;
 use crate::problem::Problem;
 use crate::with_problem;
@@ -37,6 +37,11 @@ pub struct ResidualsCmd {
     /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
+    /// The volcano: how a change that stays is detected — `scan` (the offsets over 180-day
+    /// windows, detected by the held-out gain; the README's tables) or `matched` (a matched
+    /// filter under noise fitted to the residuals; docs/matched-filter.md).
+    #[arg(long, value_enum, default_value = "scan")]
+    lasting: LastingStatistic,
     /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
     /// first only where the main source does not trade with that one; measured in the README,
     /// *A second source term in F*).
@@ -64,6 +69,7 @@ pub fn run(a: &ResidualsCmd) -> Result<()> {
         surrogates: a.surrogates,
         seed: a.seed,
         main_source: a.main_source,
+        lasting: a.lasting,
         extra_sources: a.extra_sources,
         ..AnalysisOptions::default()
     };

@@ -279,8 +279,8 @@ impl Problem for GnssProblem {
             opts.extra_sources,
         )
     }
-    fn families(&self) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
-        families::all()
+    fn families(&self, opts: &AnalysisOptions) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
+        families::all_with(opts.lasting)
     }
     /// A step at a higher-ranked lasting source's onset is that onset ([`families::onset`]);
     /// one at a station a higher-ranked drift moves is that drift ([`families::drifting`]).

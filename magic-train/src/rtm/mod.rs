@@ -197,7 +197,7 @@ impl Problem for RtmProblem {
         };
         residuals::residuals(self, model, fit, held)
     }
-    fn families(&self) -> Vec<Box<dyn DynFamily<SpectraResiduals>>> {
+    fn families(&self, _: &AnalysisOptions) -> Vec<Box<dyn DynFamily<SpectraResiduals>>> {
         families::all()
     }
     fn describe_residuals(&self, res: &SpectraResiduals) -> (serde_json::Value, String) {

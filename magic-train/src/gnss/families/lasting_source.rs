@@ -44,6 +44,12 @@
 //! the onsets of the record's last [`RECENT_DAYS`] (`recent_source`, [`LastingSource::RECENT`]),
 //! judged against its own surrogates searched the same way — what an observatory asks of its
 //! latest year, with a chance level of its own.
+//!
+//! **Or by a matched filter** ([`LastingStatistic::Matched`], `--lasting matched`; the default
+//! is the scan above): located by the GLS z of a 90-day ramp under white + AR(1) noise fitted
+//! to the residuals ([`matched`]), every station at its own weight, and detected by that z
+//! standing out of the surrogates' ([`MATCHED_SD_MARGIN`]) with any held-out gain; the rules
+//! that reject (bound, resolvable field, one station) are the same (docs/matched-filter.md).
 
 use super::held_station::{held_by, held_station, keeping_station, station_share, without_station};
 use super::latent::{self, round3, Prefix};
@@ -53,7 +59,7 @@ use super::second_source::{
 };
 use crate::analysis::projection::{orthonormal, scaled};
 use crate::analysis::score::weighted_gain;
-use crate::analysis::{Family, HeldPart, Rejection};
+use crate::analysis::{Family, HeldPart, LastingStatistic, Rejection};
 use crate::gnss::residuals::SourceGrid;
 use crate::gnss::GnssResiduals;
 use crate::model::OwnedEffect;
@@ -64,8 +70,10 @@ use rayon::prelude::*;
 use serde_json::json;
 
 mod change;
+pub mod matched;
 pub mod pulse;
 use change::Change;
+use matched::Matched;
 
 /// Candidates refined in the search.
 const CANDIDATES: usize = 3;
@@ -124,15 +132,41 @@ pub fn lasting_grid(res: &GnssResiduals) -> &SourceGrid {
 pub struct LastingSource {
     /// Days before the record's last one within which the onset is searched (`None`: anywhere).
     within_days: Option<f64>,
+    /// How the change is detected: the offsets' scan, or the matched filter ([`matched`]).
+    statistic: LastingStatistic,
 }
 
 impl LastingSource {
     /// A change that stays, begun anywhere in the record.
-    pub const WHOLE: LastingSource = LastingSource { within_days: None };
+    pub const WHOLE: LastingSource = LastingSource {
+        within_days: None,
+        statistic: LastingStatistic::Scan,
+    };
     /// A change that stays, begun within the record's last [`RECENT_DAYS`].
     pub const RECENT: LastingSource = LastingSource {
         within_days: Some(RECENT_DAYS),
+        statistic: LastingStatistic::Scan,
     };
+
+    /// The same family, detected by `statistic`.
+    pub const fn by(self, statistic: LastingStatistic) -> LastingSource {
+        LastingSource { statistic, ..self }
+    }
+
+    /// Whether a change whose middle is on `day` is one this family looks for, in a record whose
+    /// last day is `last`.
+    fn admits(&self, day: f64, last: f64) -> bool {
+        self.within_days.is_none_or(|w| last - day <= w)
+    }
+
+    /// The matched filter of residuals `r` (rows on `days`) at the onsets whose ramp's middle
+    /// this family [`admits`](Self::admits).
+    fn matched(&self, r: &[f64], nc: usize, days: &[f64]) -> Option<Matched> {
+        let last = *days.last()?;
+        Matched::new(r, nc, days, |o| {
+            self.admits(o + 0.5 * matched::RAMP_DAYS, last)
+        })
+    }
 
     /// The scanned epochs ([`offsets`] of `r`) whose onsets this family searches: those within
     /// its days of the record's last day (`days`, one per row).
@@ -154,8 +188,9 @@ pub struct LastingFit {
     pub onset: usize,
     /// Share of the held view's residual variance explained (held-out stations).
     pub score: f64,
-    /// The scan statistic at the fit (`shared_offset` at its position and onset): the
-    /// family's detection statistic, which supports its score and does not veto it.
+    /// The family's detection statistic at the fit: the scan's (`shared_offset` at its position
+    /// and onset), which supports its score; or the matched filter's z² ([`matched`]), which
+    /// detects. Neither vetoes.
     pub stat: f64,
 }
 
@@ -395,6 +430,125 @@ fn search(res: &GnssResiduals, family: LastingSource) -> LastingFit {
     best
 }
 
+/// Standard deviations above the surrogates' mean (square-root scale: |z|) the matched
+/// filter's statistic must reach to detect ([`LastingStatistic::Matched`]), beside being above
+/// every surrogate's.
+pub const MATCHED_SD_MARGIN: f64 = 2.0;
+
+/// The first row on or after `day` (the last row when none is).
+fn row_at(days: &[f64], day: f64) -> usize {
+    days.partition_point(|d| *d < day)
+        .min(days.len().saturating_sub(1))
+}
+
+/// The search by the matched filter ([`LastingStatistic::Matched`], [`matched`]) on the held
+/// view beside the pulse, as [`search`]: per onset the grid point of largest |z|, the
+/// [`CANDIDATES`] onsets where it is largest at least [`SCAN_DAYS`] apart (the main source's
+/// episodes would take every place), each refined off the grid by |z| at its onset (again from
+/// the nearest admissible grid point where a move of the main source mimics it); the largest
+/// |z| of those off the grid's bound and resolvable kept (of all of them where none is). Its
+/// onset is the ramp's middle; its score the held-out gain of a change there.
+fn search_matched(res: &GnssResiduals, family: LastingSource) -> LastingFit {
+    let ns = res.ns();
+    let loc = res.locating();
+    let r = pulse::taken_off(loc, pulse::beside(res));
+    let days = &loc.fit.days;
+    let SourceGrid {
+        points: pts,
+        patterns,
+        ..
+    } = lasting_grid(loc);
+    let Some(mf) = family
+        .matched(&r, loc.nc(), days)
+        .filter(|_| !pts.is_empty())
+    else {
+        return LastingFit::default();
+    };
+    let table = mf.table(patterns);
+    let mut by_onset: Vec<(f64, usize, usize)> = (0..mf.onsets())
+        .map(|k| {
+            let (v, pi) = argmax(table.iter().map(|row| row[k]).zip(0..));
+            (v, pi, k)
+        })
+        .collect();
+    by_onset.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let apart = (SCAN_DAYS as f64 / matched::ONSET_SPACING_DAYS).round() as usize;
+    let mut chosen: Vec<(f64, usize, usize)> = Vec::new();
+    for c in by_onset {
+        if chosen.len() >= CANDIDATES {
+            break;
+        }
+        if chosen.iter().all(|d| d.2.abs_diff(c.2) >= apart) {
+            chosen.push(c);
+        }
+    }
+    let admissible = |p: [f64; 3]| resolvable(loc, p) >= MIN_RESOLVABLE && held_by(loc, p);
+    let (ts, pre) = (translations(loc), Prefix::new(&r, loc.nc()));
+    let mut best: Option<(bool, LastingFit)> = None;
+    for (v, pi, k) in chosen {
+        let z_at = |g: &[f64]| mf.z(g, k).abs();
+        let (mut pos, mut z) = refine(loc, pts, pts[pi], v, &z_at, &|_| true);
+        if !admissible(pos) {
+            if let Some(q) = nearest(pts, pos, &admissible) {
+                (pos, z) = refine(loc, pts, q, z_at(&pattern(loc, q)), &z_at, &admissible);
+            }
+        }
+        let kept = on_bound(pts, pos).is_none() && unresolvable(loc, pos).is_none();
+        let onset = row_at(days, mf.onset_days[k] + 0.5 * matched::RAMP_DAYS);
+        let fit = LastingFit {
+            pos,
+            onset,
+            score: lasting_gain(&pattern(loc, pos), &ts, &pre, ns, onset),
+            stat: z * z,
+        };
+        if best.is_none_or(|(bk, b)| (kept && !bk) || (kept == bk && fit.stat > b.stat)) {
+            best = Some((kept, fit));
+        }
+    }
+    let mut best = best.map(|b| b.1).unwrap_or_default();
+    best.score /= loc.ctx.total_fit.max(1e-300);
+    best
+}
+
+/// [`fit_at`] by the matched filter: the onset whose ramp's middle lies between `from` and
+/// `to` (the nearest to their middle when none does, unless kept to the last year) where |z|
+/// at `pos` is largest.
+fn fit_at_matched(
+    family: LastingSource,
+    res: &GnssResiduals,
+    pos: [f64; 3],
+    (from, to): (f64, f64),
+) -> Option<LastingFit> {
+    let (ns, loc) = (res.ns(), res.locating());
+    let r = pulse::taken_off(loc, pulse::beside(res));
+    let days = &loc.fit.days;
+    let mf = family.matched(&r, loc.nc(), days)?;
+    let middle = |k: usize| mf.onset_days[k] + 0.5 * matched::RAMP_DAYS;
+    let mut inside: Vec<usize> = (0..mf.onsets())
+        .filter(|&k| (from..=to).contains(&middle(k)))
+        .collect();
+    if inside.is_empty() && family.within_days.is_none() {
+        let mid = 0.5 * (from + to);
+        inside.extend(
+            (0..mf.onsets())
+                .min_by(|&a, &b| (middle(a) - mid).abs().total_cmp(&(middle(b) - mid).abs())),
+        );
+    }
+    let g = pattern(loc, pos);
+    let k = inside
+        .into_iter()
+        .max_by(|&a, &b| mf.z(&g, a).abs().total_cmp(&mf.z(&g, b).abs()))?;
+    let onset = row_at(days, middle(k));
+    let ts = translations(loc);
+    let score = lasting_gain(&g, &ts, &Prefix::new(&r, loc.nc()), ns, onset);
+    Some(LastingFit {
+        pos,
+        onset,
+        score: score / loc.ctx.total_fit.max(1e-300),
+        stat: mf.z(&g, k).powi(2),
+    })
+}
+
 /// The family's fit at a given position, its onset the scanned epoch between the days `from`
 /// and `to` (day numbers) where the change gains most on held-out stations — the nearest
 /// scanned epoch to their middle when none lies between; score and statistic as the search
@@ -408,6 +562,9 @@ pub fn fit_at(
     pos: [f64; 3],
     (from, to): (f64, f64),
 ) -> Option<LastingFit> {
+    if family.statistic == LastingStatistic::Matched {
+        return fit_at_matched(family, res, pos, (from, to));
+    }
     let (ns, loc) = (res.ns(), res.locating());
     let r = pulse::taken_off(loc, pulse::beside(res));
     let d = family.epochs(&r, loc.nc(), &loc.fit.days);
@@ -511,7 +668,10 @@ impl Family<GnssResiduals> for LastingSource {
         }
     }
     fn fit(&self, res: &GnssResiduals) -> Result<LastingFit> {
-        Ok(search(res, *self))
+        Ok(match self.statistic {
+            LastingStatistic::Scan => search(res, *self),
+            LastingStatistic::Matched => search_matched(res, *self),
+        })
     }
     fn score(&self, fit: &LastingFit) -> f64 {
         fit.score
@@ -525,6 +685,17 @@ impl Family<GnssResiduals> for LastingSource {
     /// stands out, a score above chance is enough, as for a step.
     fn statistic_vetoes(&self) -> bool {
         false
+    }
+    /// The matched filter's z stands for the family's evidence: standing out of its
+    /// surrogates', any held-out gain above 0 carries it.
+    fn statistic_detects(&self) -> bool {
+        self.statistic == LastingStatistic::Matched
+    }
+    fn statistic_sd_margin(&self) -> f64 {
+        match self.statistic {
+            LastingStatistic::Scan => crate::analysis::STAT_SD_MARGIN,
+            LastingStatistic::Matched => MATCHED_SD_MARGIN,
+        }
     }
     fn surrogate(
         &self,

@@ -18,19 +18,24 @@ pub mod seasonal;
 pub mod second_source;
 pub mod step;
 
-use crate::analysis::DynFamily;
+use crate::analysis::{DynFamily, LastingStatistic};
 use crate::gnss::GnssResiduals;
 
-/// Every GNSS family, in report order.
+/// Every GNSS family, in report order (a change that stays found by the offsets' scan).
 pub fn all() -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
+    all_with(LastingStatistic::Scan)
+}
+
+/// Every GNSS family, in report order, a change that stays found by `lasting`.
+pub fn all_with(lasting: LastingStatistic) -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
     vec![
         Box::new(common_mode::CommonMode),
         Box::new(seasonal::Seasonal),
         Box::new(elevation::Elevation),
         Box::new(step::Step),
         Box::new(second_source::SecondSource),
-        Box::new(lasting_source::LastingSource::WHOLE),
-        Box::new(lasting_source::LastingSource::RECENT),
+        Box::new(lasting_source::LastingSource::WHOLE.by(lasting)),
+        Box::new(lasting_source::LastingSource::RECENT.by(lasting)),
         Box::new(drift::Drift),
     ]
 }

@@ -51,8 +51,12 @@ pub fn lasting(
 ) -> Option<AtTruth> {
     let (pos, from, to) = lasting_truth(e)?;
     let window = (from as f64, to as f64);
-    let whole = judged(LastingSource::WHOLE, res, pos, window, candidates, opts);
-    let recent = judged(LastingSource::RECENT, res, pos, window, candidates, opts);
+    let (whole, recent) = (
+        LastingSource::WHOLE.by(opts.lasting),
+        LastingSource::RECENT.by(opts.lasting),
+    );
+    let whole = judged(whole, res, pos, window, candidates, opts);
+    let recent = judged(recent, res, pos, window, candidates, opts);
     match (whole, recent) {
         (Some(w), Some(r)) if r.significant && !w.significant => Some(r),
         (None, r) => r,
