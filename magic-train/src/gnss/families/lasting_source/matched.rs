@@ -269,6 +269,20 @@ impl Matched {
     /// amplitude free: standard normal where the residuals are the fitted noise; 0 where the
     /// pattern or the ramp is not identified.
     pub fn z(&self, g: &[f64], k: usize) -> f64 {
+        self.z_weighted(g, self.weighted_norm2(g), k)
+    }
+
+    /// Σ g_c² / level_c: the pattern's part of [`Matched::z`]'s denominator, the same at every
+    /// onset.
+    fn weighted_norm2(&self, g: &[f64]) -> f64 {
+        g.iter()
+            .zip(&self.inv_level)
+            .map(|(v, il)| v * v * il)
+            .sum()
+    }
+
+    /// [`Matched::z`] given the pattern's [`weighted_norm2`](Matched::weighted_norm2) `gg`.
+    fn z_weighted(&self, g: &[f64], gg: f64, k: usize) -> f64 {
         let nc = self.inv_level.len();
         let Some(cross) = self.cross.get(k * nc..(k + 1) * nc) else {
             return 0.0;
@@ -278,11 +292,6 @@ impl Matched {
             .zip(cross)
             .zip(&self.inv_level)
             .map(|((gv, x), il)| gv * x * il.sqrt())
-            .sum();
-        let gg: f64 = g
-            .iter()
-            .zip(&self.inv_level)
-            .map(|(v, il)| v * v * il)
             .sum();
         let den = (gg * self.ramp_norm2[k]).sqrt();
         if den > 0.0 && den.is_finite() {
@@ -296,7 +305,12 @@ impl Matched {
     pub fn table(&self, patterns: &[Vec<f64>]) -> Vec<Vec<f64>> {
         patterns
             .par_iter()
-            .map(|g| (0..self.onsets()).map(|k| self.z(g, k).abs()).collect())
+            .map(|g| {
+                let gg = self.weighted_norm2(g);
+                (0..self.onsets())
+                    .map(|k| self.z_weighted(g, gg, k).abs())
+                    .collect()
+            })
             .collect()
     }
 
