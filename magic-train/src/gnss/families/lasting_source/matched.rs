@@ -123,11 +123,12 @@ pub struct Matched {
     pub onset_days: Vec<f64>,
     /// The fitted noise's shape.
     pub shape: Shape,
-    /// Per onset and channel, ⟨ĥ_k, ŷ_c⟩ / √level_c: the whitened ramp and residuals (each
-    /// channel's whitened under the unit level), each off the whitened constant.
+    /// Per onset and channel, ⟨ĥ_k, ŷ_c⟩ / level_c: the whitened ramp and residuals (each
+    /// channel's whitened under the unit level), each off the whitened constant, weighted so a
+    /// pattern's numerator is a plain dot product.
     cross: Vec<f64>,
-    /// Per onset, |ĥ_k|².
-    ramp_norm2: Vec<f64>,
+    /// Per onset, 1 / |ĥ_k| (0 where the ramp is not identified).
+    inv_ramp_norm: Vec<f64>,
     /// Per channel, 1 / level_c.
     inv_level: Vec<f64>,
 }
@@ -190,8 +191,33 @@ impl Kalman {
     }
 }
 
+/// 1 / √x, or 0 where x is not a positive finite number (a pattern or ramp not identified).
+fn inv_sqrt(x: f64) -> f64 {
+    if x > 0.0 && x.is_finite() {
+        1.0 / x.sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Σ aᵢbᵢ over four running sums (which the compiler can keep in one vector register).
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for i in 0..4 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// The ramp from day `onset` rising to 1 over [`RAMP_DAYS`], on `days`.
@@ -248,19 +274,15 @@ impl Matched {
             .par_iter()
             .map(|&o| {
                 let h = kalman.whiten_off(&ramp(days, o), &level);
-                let cross = ys
-                    .iter()
-                    .zip(levels)
-                    .map(|(y, l)| dot(&h, y) / l.sqrt())
-                    .collect();
-                (cross, dot(&h, &h))
+                let cross = ys.iter().zip(levels).map(|(y, l)| dot(&h, y) / l).collect();
+                (cross, inv_sqrt(dot(&h, &h)))
             })
             .collect();
         Some(Matched {
             onset_days,
             shape,
             cross: per_onset.iter().flat_map(|p| p.0.iter().copied()).collect(),
-            ramp_norm2: per_onset.iter().map(|p| p.1).collect(),
+            inv_ramp_norm: per_onset.iter().map(|p| p.1).collect(),
             inv_level: levels.iter().map(|l| 1.0 / l).collect(),
         })
     }
@@ -269,7 +291,7 @@ impl Matched {
     /// amplitude free: standard normal where the residuals are the fitted noise; 0 where the
     /// pattern or the ramp is not identified.
     pub fn z(&self, g: &[f64], k: usize) -> f64 {
-        self.z_weighted(g, self.weighted_norm2(g), k)
+        self.z_scaled(g, inv_sqrt(self.weighted_norm2(g)), k)
     }
 
     /// Σ g_c² / level_c: the pattern's part of [`Matched::z`]'s denominator, the same at every
@@ -281,24 +303,17 @@ impl Matched {
             .sum()
     }
 
-    /// [`Matched::z`] given the pattern's [`weighted_norm2`](Matched::weighted_norm2) `gg`.
-    fn z_weighted(&self, g: &[f64], gg: f64, k: usize) -> f64 {
+    /// [`Matched::z`] given 1 / √[`weighted_norm2`](Matched::weighted_norm2) `inv_g`: the
+    /// inner loop of [`Matched::table`], a dot product of `channels` terms.
+    fn z_scaled(&self, g: &[f64], inv_g: f64, k: usize) -> f64 {
         let nc = self.inv_level.len();
-        let Some(cross) = self.cross.get(k * nc..(k + 1) * nc) else {
+        let (Some(cross), Some(inv_h)) = (
+            self.cross.get(k * nc..(k + 1) * nc),
+            self.inv_ramp_norm.get(k),
+        ) else {
             return 0.0;
         };
-        let num: f64 = g
-            .iter()
-            .zip(cross)
-            .zip(&self.inv_level)
-            .map(|((gv, x), il)| gv * x * il.sqrt())
-            .sum();
-        let den = (gg * self.ramp_norm2[k]).sqrt();
-        if den > 0.0 && den.is_finite() {
-            num / den
-        } else {
-            0.0
-        }
+        dot(g, cross) * inv_g * inv_h
     }
 
     /// |z| of every pattern (rows) at every onset (columns).
@@ -306,9 +321,9 @@ impl Matched {
         patterns
             .par_iter()
             .map(|g| {
-                let gg = self.weighted_norm2(g);
+                let inv_g = inv_sqrt(self.weighted_norm2(g));
                 (0..self.onsets())
-                    .map(|k| self.z_weighted(g, gg, k).abs())
+                    .map(|k| self.z_scaled(g, inv_g, k).abs())
                     .collect()
             })
             .collect()
