@@ -33,10 +33,10 @@ pub struct LoopCmd {
     /// it stays visible and counts whole).
     #[arg(long, value_enum, default_value = "free")]
     main_source: MainSource,
-    /// The volcano: how a change that stays is detected — `scan` (the offsets over 180-day
-    /// windows, detected by the held-out gain; the README's tables) or `matched` (a matched
-    /// filter under noise fitted to the residuals; docs/matched-filter.md).
-    #[arg(long, value_enum, default_value = "scan")]
+    /// The volcano: how a change that stays is detected — `matched` (a matched filter under
+    /// noise fitted to the residuals; the README's tables) or `scan` (the offsets over 180-day
+    /// windows, detected by the held-out gain; the earlier default, docs/matched-filter.md).
+    #[arg(long, value_enum, default_value = "matched")]
     lasting: LastingStatistic,
     /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
     /// first only where the main source does not trade with that one; measured in

@@ -8,32 +8,38 @@
 //! has its own chance level: judged against the other's surrogate scores, either would be lost
 //! in the other's chance.
 //!
-//! **Located and scored on held-out stations, on the held view.** Candidates are the grid
-//! points (the second source's grid reaching shallower, [`LASTING_DEPTHS`]) whose pattern the
-//! network's offsets at some epoch follow best — mean over [`SCAN_DAYS`] days after less mean
-//! over those before, every [`SCAN_SPACING`] days to [`SCAN_EDGE_DAYS`] from the record's ends
-//! (shorter windows there, at equal noise), counting products of different stations only — and
-//! the best point at each of the few epochs where its change would gain most on held-out
-//! stations, so that one change cannot hide another at a different time (ranked by the offsets,
-//! the main source's own episodes took every place). Each is refined at its epoch by that gain,
-//! predicting every station from the others (`lasting_gain`), the score it is judged by:
-//! refined by the offsets instead, a field drawn onto the nearest station (the grid's 1 km
-//! bound) or deep under it fitted the scan as well. All of it on the held view, where a source
-//! near the main one keeps its field, with the second source's rules: rejected on the grid's
-//! bound, or when its field is mostly a move of the main source (trial seeds 101–105, against
-//! refined by the offsets and scored on the free view: 36 → 45 of 60 lasting deflations found).
-//! A candidate refined to where a move mimics it (a near source located deep of the truth,
-//! where a move explains more of its field) is refined again within the resolvable region,
-//! from its nearest grid point there: the resolvable point beside it fits nearly as well
-//! (trial seeds 101–110: 101 → 102 of 120 found; a grid masked to that region found as many
-//! but lost a held-out one its mask kept the search from starting at).
-//! The network translations are a nuisance in the gain and are removed before the surrogates
-//! randomise each station's series, as for the second source. A pulse of another source in the
-//! same residuals is taken off over its months before the search and the surrogates
-//! ([`pulse`]): the search took its rise or fall for a change. The scan's value at the fit is
-//! the family's detection statistic: standing out of the surrogates', it makes a score merely
-//! above chance significant, as a step's does; unlike a step's, it never rejects a score beyond
-//! its margin.
+//! **Located and detected by a matched filter** ([`LastingStatistic::Matched`], the default):
+//! by the GLS z of a 90-day ramp under white + AR(1) noise fitted to the residuals
+//! ([`matched`]), every station at its own weight, and detected by that z standing out of the
+//! surrogates' ([`MATCHED_SD_MARGIN`]) with any held-out gain; the rules that reject (bound,
+//! resolvable field, one station) are those below (docs/matched-filter.md: it finds the changes
+//! at the record's ends the scan missed).
+//!
+//! **Or by the offsets' scan** (`--lasting scan`), **located and scored on held-out stations, on
+//! the held view.** Candidates are the grid points (the second source's grid reaching shallower,
+//! [`LASTING_DEPTHS`]) whose pattern the network's offsets at some epoch follow best — mean over
+//! [`SCAN_DAYS`] days after less mean over those before, every [`SCAN_SPACING`] days to
+//! [`SCAN_EDGE_DAYS`] from the record's ends (shorter windows there, at equal noise), counting
+//! products of different stations only — and the best point at each of the few epochs where its
+//! change would gain most on held-out stations, so that one change cannot hide another at a
+//! different time (ranked by the offsets, the main source's own episodes took every place). Each is
+//! refined at its epoch by that gain, predicting every station from the others (`lasting_gain`),
+//! the score it is judged by: refined by the offsets instead, a field drawn onto the nearest
+//! station (the grid's 1 km bound) or deep under it fitted the scan as well. All of it on the held
+//! view, where a source near the main one keeps its field, with the second source's rules: rejected
+//! on the grid's bound, or when its field is mostly a move of the main source (trial seeds 101–105,
+//! against refined by the offsets and scored on the free view: 36 → 45 of 60 lasting deflations
+//! found). A candidate refined to where a move mimics it (a near source located deep of the truth,
+//! where a move explains more of its field) is refined again within the resolvable region, from its
+//! nearest grid point there: the resolvable point beside it fits nearly as well (trial seeds
+//! 101–110: 101 → 102 of 120 found; a grid masked to that region found as many but lost a held-out
+//! one its mask kept the search from starting at). The network translations are a nuisance in the
+//! gain and are removed before the surrogates randomise each station's series, as for the second
+//! source. A pulse of another source in the same residuals is taken off over its months before the
+//! search and the surrogates ([`pulse`]): the search took its rise or fall for a change. The scan's
+//! value at the fit is the family's detection statistic: standing out of the surrogates', it makes
+//! a score merely above chance significant, as a step's does; unlike a step's, it never rejects a
+//! score beyond its margin.
 //!
 //! **Twice: over the whole record, and over its last year.** A change that began in the last
 //! months explains little of the record's variance, and the family's chance level is its
@@ -44,12 +50,6 @@
 //! the onsets of the record's last [`RECENT_DAYS`] (`recent_source`, [`LastingSource::RECENT`]),
 //! judged against its own surrogates searched the same way — what an observatory asks of its
 //! latest year, with a chance level of its own.
-//!
-//! **Or by a matched filter** ([`LastingStatistic::Matched`], `--lasting matched`; the default
-//! is the scan above): located by the GLS z of a 90-day ramp under white + AR(1) noise fitted
-//! to the residuals ([`matched`]), every station at its own weight, and detected by that z
-//! standing out of the surrogates' ([`MATCHED_SD_MARGIN`]) with any held-out gain; the rules
-//! that reject (bound, resolvable field, one station) are the same (docs/matched-filter.md).
 
 use super::held_station::{held_by, held_station, keeping_station, station_share, without_station};
 use super::latent::{self, round3, Prefix};
@@ -143,12 +143,12 @@ impl LastingSource {
     /// A change that stays, begun anywhere in the record.
     pub const WHOLE: LastingSource = LastingSource {
         within_days: None,
-        statistic: LastingStatistic::Scan,
+        statistic: LastingStatistic::Matched,
     };
     /// A change that stays, begun within the record's last [`RECENT_DAYS`].
     pub const RECENT: LastingSource = LastingSource {
         within_days: Some(RECENT_DAYS),
-        statistic: LastingStatistic::Scan,
+        statistic: LastingStatistic::Matched,
     };
 
     /// The same family, detected by `statistic`.

@@ -21,9 +21,10 @@ pub mod step;
 use crate::analysis::{DynFamily, LastingStatistic};
 use crate::gnss::GnssResiduals;
 
-/// Every GNSS family, in report order (a change that stays found by the offsets' scan).
+/// Every GNSS family, in report order (a change that stays found by the default statistic,
+/// the matched filter).
 pub fn all() -> Vec<Box<dyn DynFamily<GnssResiduals>>> {
-    all_with(LastingStatistic::Scan)
+    all_with(LastingStatistic::default())
 }
 
 /// Every GNSS family, in report order, a change that stays found by `lasting`.

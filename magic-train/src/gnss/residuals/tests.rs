@@ -2,6 +2,7 @@
 //! tell a second source from a move of the main one.
 
 use super::*;
+use crate::analysis::LastingStatistic;
 use crate::gnss::synth::draw;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
@@ -242,7 +243,7 @@ fn a_source_beside_the_main_one_is_mostly_a_move_of_it() {
 /// The lasting source is located only where its field is not mostly a move of the main
 /// source: a change that stays, at a point beside the main source that such a move mimics, is
 /// located at a resolvable point (refined again within that region, and so not rejected as a
-/// move), never at its own.
+/// move), never at its own — by either statistic.
 #[test]
 fn the_lasting_source_is_located_where_a_move_cannot_mimic_it() {
     use crate::analysis::{Family, Rejection};
@@ -272,17 +273,20 @@ fn the_lasting_source_is_located_where_a_move_cannot_mimic_it() {
         .collect();
     let res = beside_main_source(&network, &scale, main, span, &rows);
     assert!(resolvable(&res, beside) < MIN_RESOLVABLE);
-    let fit = LastingSource::WHOLE.fit(&res).unwrap();
-    assert!(
-        resolvable(&res, fit.pos) >= MIN_RESOLVABLE,
-        "located at {:?}",
-        fit.pos
-    );
-    let why = LastingSource::WHOLE.reject(&res, &fit);
-    assert!(
-        !matches!(why, Some(Rejection::Unresolvable { .. })),
-        "{why:?}"
-    );
+    for statistic in [LastingStatistic::Matched, LastingStatistic::Scan] {
+        let family = LastingSource::WHOLE.by(statistic);
+        let fit = family.fit(&res).unwrap();
+        assert!(
+            resolvable(&res, fit.pos) >= MIN_RESOLVABLE,
+            "{statistic:?}: located at {:?}",
+            fit.pos
+        );
+        let why = family.reject(&res, &fit);
+        assert!(
+            !matches!(why, Some(Rejection::Unresolvable { .. })),
+            "{statistic:?}: {why:?}"
+        );
+    }
 }
 
 /// The matched filter ([`LastingStatistic::Matched`]) finds a change that stays in slow noise
@@ -293,7 +297,7 @@ fn the_lasting_source_is_located_where_a_move_cannot_mimic_it() {
 /// gives alone (4.1); the family's fit at the truth too, its onset within the change.
 #[test]
 fn the_matched_filter_finds_a_change_that_stays_in_slow_noise() {
-    use crate::analysis::{Family, LastingStatistic};
+    use crate::analysis::Family;
     use crate::gnss::families::lasting_source::{fit_at, LastingSource};
     use magic_core::mogi::field;
     let (network, scale, main, span) = akutan_main_source();
