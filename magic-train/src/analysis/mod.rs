@@ -104,7 +104,7 @@ impl Default for AnalysisOptions {
             main_source: MainSource::Free,
             extra_sources: 1,
             steps: 1,
-            lasting: LastingStatistic::Matched,
+            lasting: LastingStatistic::default(),
         }
     }
 }

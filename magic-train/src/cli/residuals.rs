@@ -40,7 +40,7 @@ pub struct ResidualsCmd {
     /// The volcano: how a change that stays is detected — `matched` (a matched filter under
     /// noise fitted to the residuals; the README's tables) or `scan` (the offsets over 180-day
     /// windows, detected by the held-out gain; the earlier default, docs/matched-filter.md).
-    #[arg(long, value_enum, default_value = "matched")]
+    #[arg(long, value_enum, default_value_t)]
     lasting: LastingStatistic,
     /// The volcano: the most extra point sources F may hold (the loop adds a second beside a
     /// first only where the main source does not trade with that one; measured in the README,
