@@ -71,12 +71,11 @@ use serde_json::json;
 
 mod change;
 mod filtered;
-pub mod matched;
 pub mod pulse;
+use super::matched::{self, Matched};
 use change::Change;
 pub use filtered::MATCHED_SD_MARGIN;
 use filtered::{fit_at_matched, search_matched};
-use matched::Matched;
 
 /// Candidates refined in the search.
 const CANDIDATES: usize = 3;

@@ -13,6 +13,7 @@ pub mod elevation;
 pub mod held_station;
 pub mod lasting_source;
 pub mod latent;
+pub mod matched;
 pub mod onset;
 pub mod seasonal;
 pub mod second_source;

@@ -2,7 +2,7 @@
 //! table over the grid and onsets, the best onsets refined off the grid, and the fit at a given
 //! position; the numerics are [`matched`](super::matched)'s.
 
-use super::matched;
+use super::super::matched;
 use super::{
     argmax, held_by, lasting_gain, lasting_grid, nearest, on_bound, pattern, pulse, refine,
     resolvable, translations, unresolvable, LastingFit, LastingSource, Prefix, CANDIDATES,

@@ -4,7 +4,13 @@ use rand::{Rng, SeedableRng};
 
 /// `n` values of white (unit) plus AR(1) (`phi`, stationary variance `rho`) noise, times
 /// `sd`, on consecutive days.
-fn noise(n: usize, phi: f64, rho: f64, sd: f64, rng: &mut rand::rngs::StdRng) -> Vec<f64> {
+pub(super) fn noise(
+    n: usize,
+    phi: f64,
+    rho: f64,
+    sd: f64,
+    rng: &mut rand::rngs::StdRng,
+) -> Vec<f64> {
     let mut gauss = || {
         let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
         (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
@@ -19,7 +25,7 @@ fn noise(n: usize, phi: f64, rho: f64, sd: f64, rng: &mut rand::rngs::StdRng) ->
 }
 
 /// Channels side by side, row-major.
-fn rows(channels: &[Vec<f64>]) -> Vec<f64> {
+pub(super) fn rows(channels: &[Vec<f64>]) -> Vec<f64> {
     let n = channels[0].len();
     (0..n)
         .flat_map(|t| channels.iter().map(move |c| c[t]))

@@ -1,7 +1,9 @@
 //! The matched filter for a change that stays ([`Matched`]): the residuals whitened by a noise
 //! model fitted to them (white plus AR(1), one shape for every channel, each its own level), a
 //! ramp of [`RAMP_DAYS`] at onsets every [`ONSET_SPACING_DAYS`], and the generalised least
-//! squares z of a source's pattern along each ramp, every station at its own weight.
+//! squares z of a source's pattern along each ramp, every station at its own weight — the
+//! lasting source's; and, under the same noise, for a change that comes back ([`pulse`]), the
+//! second source's.
 //!
 //! Why: whitened by slow noise, a change is seen while it happens, and a ramp about as long as
 //! it matches it nearly whole; the persistence needs long lags (1–512 days) to be told from a
@@ -66,8 +68,12 @@ fn structure(r: &[f64], nc: usize, days: &[f64], c: usize, lag: usize) -> Option
 /// function over its one-day value fits, on a log scale, the median over channels of theirs at
 /// the [`LAGS`] within a quarter of the record (persistences `1 − 10^(−4…−0.5)`, variance
 /// ratios `10^(−2…3)`); and each channel's white variance from its one-day value. `None` when
-/// the record is too short for two lags or a channel has no one-day differences.
+/// the record is too short for two lags, a channel has no one-day differences, or `r` does not
+/// hold `nc` channels on `days`.
 pub fn fit_noise(r: &[f64], nc: usize, days: &[f64]) -> Option<(Shape, Vec<f64>)> {
+    if nc == 0 || r.len() != days.len() * nc {
+        return None;
+    }
     let span = days.last()? - days.first()?;
     let lags: Vec<usize> = LAGS
         .iter()
@@ -182,6 +188,17 @@ impl Kalman {
             .collect()
     }
 
+    /// The whitened constant, of unit norm (`None` where it has none).
+    fn unit_constant(&self) -> Option<Vec<f64>> {
+        let mut level = self.whiten(&vec![1.0; self.rows.len()]);
+        let norm = dot(&level, &level).sqrt();
+        if !(norm > 0.0 && norm.is_finite()) {
+            return None;
+        }
+        level.iter_mut().for_each(|v| *v /= norm);
+        Some(level)
+    }
+
     /// `x` whitened and projected off the unit vector `level` (the whitened constant).
     fn whiten_off(&self, x: &[f64], level: &[f64]) -> Vec<f64> {
         let mut e = self.whiten(x);
@@ -257,12 +274,7 @@ impl Matched {
             return None;
         }
         let kalman = Kalman::new(shape, days);
-        let mut level = kalman.whiten(&vec![1.0; n]);
-        let norm = dot(&level, &level).sqrt();
-        if !(norm > 0.0 && norm.is_finite()) {
-            return None;
-        }
-        level.iter_mut().for_each(|v| *v /= norm);
+        let level = kalman.unit_constant()?;
         let ys: Vec<Vec<f64>> = (0..nc)
             .into_par_iter()
             .map(|c| {
@@ -335,5 +347,6 @@ impl Matched {
     }
 }
 
+pub mod pulse;
 #[cfg(test)]
 mod tests;
