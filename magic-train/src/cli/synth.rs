@@ -156,7 +156,7 @@ pub struct SynthCheckCmd {
     /// moving it produces is projected off; point sources are located and scored with it held) or
     /// `held` in place (only its field's direction is projected off, so a second source near
     /// it stays visible and counts whole).
-    #[arg(long, value_enum, default_value = "free")]
+    #[arg(long, value_enum, default_value_t)]
     main_source: MainSource,
     /// The volcano: how a change that stays is detected — `matched` (a matched filter under
     /// noise fitted to the residuals; the README's tables) or `scan` (the offsets over 180-day
@@ -317,7 +317,7 @@ pub struct SynthLoopCmd {
     /// moving it produces is projected off; point sources are located and scored with it held) or
     /// `held` in place (only its field's direction is projected off, so a second source near
     /// it stays visible and counts whole).
-    #[arg(long, value_enum, default_value = "free")]
+    #[arg(long, value_enum, default_value_t)]
     main_source: MainSource,
     /// The volcano: how a change that stays is detected — `matched` (a matched filter under
     /// noise fitted to the residuals; the README's tables) or `scan` (the offsets over 180-day
