@@ -8,8 +8,9 @@
 //! sees a pulse of months against the slow noise of those months; whitened, the pulse is seen
 //! while it rises and falls, where that noise is small. A change that stays matches a pulse's
 //! rise alone, and would stand out as well: less its ramp's z², it does not (trial seeds
-//! 101–110 under `red`, lasting deflations: at most 1.5 deviations above the surrogates, pulses
-//! 1.6–27). Its look-elsewhere (onsets, durations) is the surrogates' too, searched alike.
+//! 101–110, both generators: beside lasting deflations at most 1.6 deviations above the
+//! surrogates, 86 of 90 pulses 5.4 or more). Its look-elsewhere (onsets, durations) is the
+//! surrogates' too, searched alike.
 
 use super::{dot, fit_noise, inv_sqrt, ramp, Kalman, Shape, ONSET_SPACING_DAYS, RAMP_DAYS};
 use rayon::prelude::*;
