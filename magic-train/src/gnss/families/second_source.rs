@@ -406,8 +406,8 @@ fn search(res: &GnssResiduals, xs: &[(usize, Cross)]) -> SourceFit {
 
 /// The z² a pulse of a source at `pos` adds beyond a change that stays, in `res`'s residuals
 /// whitened by the noise fitted to them, at the pulse where that is largest ([`pulse::peak`],
-/// [`Peak::beyond`](pulse::Peak::beyond)); 0 where none can be computed or none adds. The family's detection statistic: it supports a score above chance
-/// ([`PULSE_SD_MARGIN`]).
+/// [`Peak::beyond`](pulse::Peak::beyond)); 0 where none can be computed or none adds. The
+/// family's detection statistic: it supports a score above chance ([`PULSE_SD_MARGIN`]).
 pub fn pulse_stat(res: &GnssResiduals, pos: [f64; 3]) -> f64 {
     pulse::peak(&res.fit.r, res.nc(), &res.fit.days, &pattern(res, pos))
         .map_or(0.0, |p| p.beyond().max(0.0))
