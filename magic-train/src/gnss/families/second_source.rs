@@ -573,14 +573,18 @@ pub(super) fn declare_at(pos: [f64; 3], score: f64) -> Option<OwnedEffect> {
 }
 
 /// A source's episode, as its daily volume change shows it: the 30-day running mean relative to
-/// its median (`dev`), its largest value (`peak`, at `at`) and the rows `start..=end` around it
-/// where the change stays beyond twice its robust spread and 5 % of the peak.
+/// its median (`dev`), its largest value (`peak`, at row `at`) and the rows `start..=end` around
+/// it where the change stays beyond `threshold`: twice its robust spread and 5 % of the peak.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Episode {
     /// The 30-day running mean less its median.
     pub dev: Vec<f64>,
     /// The largest deviation (signed).
     pub peak: f64,
+    /// The row of the peak.
+    pub at: usize,
+    /// How far beyond its median (in the peak's direction) the change stays within the episode.
+    pub threshold: f64,
     /// First row of the episode.
     pub start: usize,
     /// Last row of the episode.
@@ -624,6 +628,8 @@ impl Episode {
         Episode {
             dev,
             peak,
+            at: ipk,
+            threshold: thr,
             start: a,
             end: b,
         }

@@ -46,14 +46,47 @@ pub struct Pulse {
 /// rows lie on each side of it, and over up to [`SCAN_DAYS`] rows before its start and after its
 /// end the change's mean lies within half its peak of its median. The episode of a change that
 /// stays reaches the record's end, or one side of it holds the change's other level.
+///
+/// An episode that reaches an end of the record may be a pulse beside a change that stays: it
+/// comes back, though not to the median, to the level of the record's last (or first)
+/// [`SIDE_DAYS`] rows. When that level lies within half the peak, the episode ends (or starts)
+/// where the change last (first) stands beyond its threshold from it (a pulse and a lasting
+/// deflation 2.9 km apart in the record's last year: the pulse's episode ran to the record's
+/// end on the deflation's share of its pattern, and was not taken off).
 pub fn comes_back(ep: &Episode, n: usize) -> Option<(usize, usize)> {
-    if ep.peak == 0.0 || ep.start < SIDE_DAYS || ep.end + SIDE_DAYS >= n || ep.dev.len() != n {
+    if ep.peak == 0.0 || ep.dev.len() != n || n < 2 * SIDE_DAYS || ep.at >= n {
         return None;
     }
     let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
-    let before = mean(&ep.dev[ep.start.saturating_sub(SCAN_DAYS)..ep.start]);
-    let after = mean(&ep.dev[ep.end + 1..(ep.end + 1 + SCAN_DAYS).min(n)]);
-    (before.abs().max(after.abs()) < 0.5 * ep.peak.abs()).then_some((ep.start, ep.end))
+    let s = ep.peak.signum();
+    let beyond = |t: usize, level: f64| (ep.dev[t] - level) * s > ep.threshold;
+    let (mut start, mut end) = (ep.start, ep.end);
+    if end + 1 == n {
+        let level = mean(&ep.dev[n - SIDE_DAYS..]);
+        if level.abs() >= 0.5 * ep.peak.abs() {
+            return None;
+        }
+        end = ep.at;
+        while end + 1 < n && beyond(end + 1, level) {
+            end += 1;
+        }
+    }
+    if start == 0 {
+        let level = mean(&ep.dev[..SIDE_DAYS]);
+        if level.abs() >= 0.5 * ep.peak.abs() {
+            return None;
+        }
+        start = ep.at;
+        while start > 0 && beyond(start - 1, level) {
+            start -= 1;
+        }
+    }
+    if start < SIDE_DAYS || end + SIDE_DAYS >= n {
+        return None;
+    }
+    let before = mean(&ep.dev[start.saturating_sub(SCAN_DAYS)..start]);
+    let after = mean(&ep.dev[end + 1..(end + 1 + SCAN_DAYS).min(n)]);
+    (before.abs().max(after.abs()) < 0.5 * ep.peak.abs()).then_some((start, end))
 }
 
 /// How far an episode stands out: its peak over the spread (1.4826 × the median absolute
@@ -168,6 +201,29 @@ mod tests {
         let early = series(|t| if (10..100).contains(&t) { -5.0 } else { 0.0 });
         assert!(comes_back(&Episode::of(&early), 2000).is_none());
         assert!(comes_back(&Episode::of(&[0.0; 500]), 500).is_none());
+        // A pulse in the record's last year beside a change that stays from within it: the
+        // episode comes back to the change's level, short of the record's end (and as well in
+        // its first year, the change having stayed from the record's start).
+        let late = series(|t| {
+            (if (1700..1800).contains(&t) { -5.0 } else { 0.0 })
+                + if t >= 1750 { -1.5 } else { 0.0 }
+        });
+        assert_eq!(Episode::of(&late).end, 1999);
+        let (a, b) = comes_back(&Episode::of(&late), 2000).unwrap();
+        assert!(a < 1700 && a > 1670 && b > 1790 && b < 1830, "{a} {b}");
+        let early = series(|t| {
+            (if (200..300).contains(&t) { -5.0 } else { 0.0 }) + if t < 250 { -1.5 } else { 0.0 }
+        });
+        assert_eq!(Episode::of(&early).start, 0);
+        let (a, b) = comes_back(&Episode::of(&early), 2000).unwrap();
+        assert!(a < 200 && a > 170 && b > 290 && b < 330, "{a} {b}");
+        // A change that stays and overshoots less than twice its level does not come back.
+        let overshoot = series(|t| match t {
+            1700..=1759 => -8.0,
+            1760.. => -5.0,
+            _ => 0.0,
+        });
+        assert!(comes_back(&Episode::of(&overshoot), 2000).is_none());
     }
 
     #[test]
