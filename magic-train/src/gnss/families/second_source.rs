@@ -617,22 +617,31 @@ impl Episode {
                 },
             );
         let thr = (2.0 * sigma).max(0.05 * peak.abs());
-        let active = |i: usize| dev[i] * peak.signum() > thr;
-        let (mut a, mut b) = (ipk, ipk);
-        while a > 0 && active(a - 1) {
-            a -= 1;
-        }
-        while b + 1 < n && active(b + 1) {
-            b += 1;
-        }
-        Episode {
+        let mut ep = Episode {
             dev,
             peak,
             at: ipk,
             threshold: thr,
-            start: a,
-            end: b,
+            start: ipk,
+            end: ipk,
+        };
+        (ep.start, ep.end) = ep.around(0.0);
+        ep
+    }
+
+    /// The first and last rows of the run around the peak where the change stands beyond
+    /// `threshold` from `level` in the peak's direction (`level` 0: the episode itself).
+    pub fn around(&self, level: f64) -> (usize, usize) {
+        let n = self.dev.len();
+        let beyond = |t: usize| (self.dev[t] - level) * self.peak.signum() > self.threshold;
+        let (mut a, mut b) = (self.at, self.at);
+        while a > 0 && beyond(a - 1) {
+            a -= 1;
         }
+        while b + 1 < n && beyond(b + 1) {
+            b += 1;
+        }
+        (a, b)
     }
 }
 

@@ -58,35 +58,28 @@ pub fn comes_back(ep: &Episode, n: usize) -> Option<(usize, usize)> {
         return None;
     }
     let mean = |s: &[f64]| s.iter().sum::<f64>() / s.len() as f64;
-    let s = ep.peak.signum();
-    let beyond = |t: usize, level: f64| (ep.dev[t] - level) * s > ep.threshold;
+    let within_half = |v: f64| v.abs() < 0.5 * ep.peak.abs();
     let (mut start, mut end) = (ep.start, ep.end);
     if end + 1 == n {
         let level = mean(&ep.dev[n - SIDE_DAYS..]);
-        if level.abs() >= 0.5 * ep.peak.abs() {
+        if !within_half(level) {
             return None;
         }
-        end = ep.at;
-        while end + 1 < n && beyond(end + 1, level) {
-            end += 1;
-        }
+        end = ep.around(level).1;
     }
     if start == 0 {
         let level = mean(&ep.dev[..SIDE_DAYS]);
-        if level.abs() >= 0.5 * ep.peak.abs() {
+        if !within_half(level) {
             return None;
         }
-        start = ep.at;
-        while start > 0 && beyond(start - 1, level) {
-            start -= 1;
-        }
+        start = ep.around(level).0;
     }
     if start < SIDE_DAYS || end + SIDE_DAYS >= n {
         return None;
     }
     let before = mean(&ep.dev[start.saturating_sub(SCAN_DAYS)..start]);
     let after = mean(&ep.dev[end + 1..(end + 1 + SCAN_DAYS).min(n)]);
-    (before.abs().max(after.abs()) < 0.5 * ep.peak.abs()).then_some((start, end))
+    within_half(before.abs().max(after.abs())).then_some((start, end))
 }
 
 /// How far an episode stands out: its peak over the spread (1.4826 × the median absolute
